@@ -1,0 +1,153 @@
+"""What the sync and async clients share: request building and response decoding.
+
+The two clients differ only in whether they await httpx; everything else lives here.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from schemas import Scenario
+
+DEFAULT_URL = "http://127.0.0.1:8000"
+TERMINAL = frozenset({"succeeded", "failed", "cancelled", "timed_out"})
+LONG_POLL_SECONDS = 10.0  # one GET ?wait= waits at most this long
+
+
+def headers(api_key: str | None) -> dict[str, str]:
+    h = {"Accept": "application/json, application/problem+json"}
+    if api_key:
+        h["Authorization"] = f"Bearer {api_key}"
+    return h
+
+
+def submission(scenario: Scenario | dict[str, Any] | None, preset: str | None,
+               overrides: dict[str, Any] | None, timeout_seconds: float | None
+               ) -> dict[str, Any]:
+    """The POST /v1/jobs body."""
+    if (scenario is None) == (preset is None):
+        raise ValueError("give exactly one of a scenario and preset=")
+    body: dict[str, Any]
+    if preset is not None:
+        body = {"preset": preset}
+        if overrides:
+            body["overrides"] = overrides
+    else:
+        if overrides:
+            raise ValueError("overrides= applies to a preset only")
+        data = scenario.model_dump(mode="json") if isinstance(scenario, Scenario) else scenario
+        body = {"scenario": data}
+    if timeout_seconds is not None:
+        body["timeout_seconds"] = timeout_seconds
+    return body
+
+
+def trajectory_params(start: int | None, stop: int | None, stride: int,
+                      agents: slice | Sequence[int] | str | None,
+                      arrays: Sequence[str] | str | None, fmt: str) -> dict[str, Any]:
+    params: dict[str, Any] = {"format": fmt, "stride": stride}
+    if start is not None:
+        params["start"] = start
+    if stop is not None:
+        params["stop"] = stop
+    if agents is not None:
+        params["agents"] = _agents(agents)
+    if arrays is not None:
+        params["arrays"] = arrays if isinstance(arrays, str) else ",".join(arrays)
+    return params
+
+
+def _agents(agents: slice | Sequence[int] | str) -> str:
+    if isinstance(agents, str):
+        return agents
+    if isinstance(agents, slice):
+        parts = ["" if v is None else str(int(v)) for v in (agents.start, agents.stop)]
+        if agents.step is not None:
+            parts.append(str(int(agents.step)))
+        return ":".join(parts)
+    return ",".join(str(int(i)) for i in agents)
+
+
+def load_npz(content: bytes) -> dict[str, np.ndarray]:
+    with np.load(io.BytesIO(content), allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+def metrics(body: dict[str, Any]) -> dict[str, Any]:
+    """Observables as float arrays (missing values as NaN), the summary as sent."""
+    obs = {k: np.array([np.nan if v is None else v for v in vals], dtype=float)
+           for k, vals in body["observables"].items()}
+    return {"summary": body["summary"], "observables": obs}
+
+
+class JobState:
+    """The fields of a job, shared by `Job` and `AsyncJob`."""
+
+    data: dict[str, Any]
+
+    @property
+    def id(self) -> str:
+        return self.data["id"]
+
+    @property
+    def status(self) -> str:
+        return self.data["status"]
+
+    @property
+    def progress(self) -> float:
+        return self.data["progress"]
+
+    @property
+    def done(self) -> bool:
+        return self.status in TERMINAL
+
+    @property
+    def error(self) -> dict[str, Any] | None:
+        """The problem that ended the job (failed, timed out), else None."""
+        return self.data.get("error") if self.status in ("failed", "timed_out") else None
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.id} {self.status} {self.progress:.0%}>"
+
+
+class ProgressBar:
+    """A one-line progress bar on a terminal (stderr); silent when disabled."""
+
+    WIDTH = 30
+
+    def __init__(self, enabled: bool | None, stream: TextIO | None = None):
+        self.stream = stream or sys.stderr
+        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self._last = ""
+
+    def update(self, job: JobState) -> None:
+        if not self.enabled:
+            return
+        filled = int(job.progress * self.WIDTH)
+        line = (f"\r{job.id[:8]} [{'#' * filled}{'.' * (self.WIDTH - filled)}] "
+                f"{job.progress:4.0%} {job.status:<10}")
+        if line != self._last:
+            self._last = line
+            self.stream.write(line)
+            self.stream.flush()
+
+    def close(self) -> None:
+        if self.enabled and self._last:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def check_digest(header: str | None, actual: bytes, path: Path) -> None:
+    """Compare a Repr-Digest header with the sha-256 of what was saved; delete on mismatch."""
+    if header and header.startswith("sha-256=:"):
+        expected = base64.b64decode(header[len("sha-256=:"):].rstrip(":"))
+        if expected != actual:
+            path.unlink(missing_ok=True)
+            raise OSError(f"download of {path.name} is corrupt (sha-256 mismatch)")

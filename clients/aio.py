@@ -1,0 +1,156 @@
+"""The asynchronous twin of `clients.sync`: `AsyncClient` and `AsyncJob`."""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from collections.abc import AsyncIterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+
+from schemas import Scenario
+
+from . import _core
+from .errors import JobTimeout, raise_for_status
+
+
+class AsyncClient:
+    """Like `Client`, with every network call awaited.
+
+    >>> async with AsyncClient() as c:
+    ...     job = await (await c.submit(preset="vicsek-1995")).wait()
+    """
+
+    def __init__(self, base_url: str = _core.DEFAULT_URL, api_key: str | None = None, *,
+                 transport: httpx.AsyncBaseTransport | None = None, timeout: float = 30.0):
+        self.base_url = base_url.rstrip("/")
+        self.timeout = timeout
+        self._api_key = api_key
+        self._transport = transport
+        self._http: httpx.AsyncClient | None = None
+
+    @property
+    def http(self) -> httpx.AsyncClient:
+        if self._http is None:
+            self._http = httpx.AsyncClient(base_url=self.base_url,
+                                           headers=_core.headers(self._api_key),
+                                           transport=self._transport, timeout=self.timeout)
+        return self._http
+
+    async def aclose(self) -> None:
+        if self._http is not None:
+            await self._http.aclose()
+            self._http = None
+
+    async def __aenter__(self) -> AsyncClient:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.aclose()
+
+    async def request(self, method: str, path: str, **kwargs: Any) -> httpx.Response:
+        response = await self.http.request(method, path, **kwargs)
+        raise_for_status(response)
+        return response
+
+    async def submit(self, scenario: Scenario | dict[str, Any] | None = None, *,
+                     preset: str | None = None, overrides: dict[str, Any] | None = None,
+                     timeout_seconds: float | None = None, idempotency_key: str | None = None
+                     ) -> AsyncJob:
+        body = _core.submission(scenario, preset, overrides, timeout_seconds)
+        hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
+        r = await self.request("POST", "/v1/jobs", json=body, headers=hdrs)
+        return AsyncJob(self, r.json())
+
+    async def job(self, job_id: str) -> AsyncJob:
+        return AsyncJob(self, (await self.request("GET", f"/v1/jobs/{job_id}")).json())
+
+    async def jobs(self, status: str | Sequence[str] | None = None, model: str | None = None,
+                   page_size: int = 100) -> AsyncIterator[AsyncJob]:
+        params: dict[str, Any] = {"limit": page_size}
+        if status is not None:
+            params["status"] = [status] if isinstance(status, str) else list(status)
+        if model is not None:
+            params["model"] = model
+        while True:
+            page = (await self.request("GET", "/v1/jobs", params=params)).json()
+            for item in page["items"]:
+                yield AsyncJob(self, item)
+            if not page["next_cursor"]:
+                return
+            params["cursor"] = page["next_cursor"]
+
+    async def models(self) -> list[dict[str, Any]]:
+        return (await self.request("GET", "/v1/models")).json()
+
+    async def model_schema(self, kind: str) -> dict[str, Any]:
+        return (await self.request("GET", f"/v1/models/{kind}")).json()
+
+    async def presets(self) -> list[dict[str, Any]]:
+        return (await self.request("GET", "/v1/presets")).json()
+
+    async def health(self) -> dict[str, Any]:
+        return (await self.request("GET", "/healthz")).json()
+
+
+class AsyncJob(_core.JobState):
+    def __init__(self, client: AsyncClient, data: dict[str, Any]):
+        self.client = client
+        self.data = data
+
+    async def refresh(self, wait: float = 0.0) -> AsyncJob:
+        params = {"wait": wait} if wait > 0 else None
+        r = await self.client.request("GET", f"/v1/jobs/{self.id}", params=params,
+                                      timeout=self.client.timeout + wait)
+        self.data = r.json()
+        return self
+
+    async def wait(self, timeout: float | None = None, progress: bool | None = None
+                   ) -> AsyncJob:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        bar = _core.ProgressBar(progress)
+        try:
+            bar.update(self)
+            while not self.done:
+                remaining = _core.LONG_POLL_SECONDS if deadline is None else (
+                    deadline - time.monotonic())
+                if remaining <= 0:
+                    raise JobTimeout(f"job {self.id} still {self.status} after {timeout} s")
+                await self.refresh(wait=min(_core.LONG_POLL_SECONDS, remaining))
+                bar.update(self)
+        finally:
+            bar.close()
+        return self
+
+    async def cancel(self) -> AsyncJob:
+        self.data = (await self.client.request("POST", f"/v1/jobs/{self.id}/cancel")).json()
+        return self
+
+    async def metrics(self) -> dict[str, Any]:
+        r = await self.client.request("GET", f"/v1/jobs/{self.id}/metrics")
+        return _core.metrics(r.json())
+
+    async def trajectory(self, start: int | None = None, stop: int | None = None,
+                         stride: int = 1, agents: slice | Sequence[int] | str | None = None,
+                         arrays: Sequence[str] | str | None = None) -> dict[str, np.ndarray]:
+        params = _core.trajectory_params(start, stop, stride, agents, arrays, "npz")
+        r = await self.client.request("GET", f"/v1/jobs/{self.id}/trajectory", params=params)
+        return _core.load_npz(r.content)
+
+    async def download(self, path: str | Path) -> Path:
+        path = Path(path)
+        digest = hashlib.sha256()
+        async with self.client.http.stream("GET", f"/v1/jobs/{self.id}/trajectory.h5") as r:
+            if r.status_code >= 400:
+                await r.aread()
+                raise_for_status(r)
+            expected = r.headers.get("Repr-Digest")
+            with path.open("wb") as f:
+                async for chunk in r.aiter_bytes():
+                    digest.update(chunk)
+                    f.write(chunk)
+        _core.check_digest(expected, digest.digest(), path)
+        return path

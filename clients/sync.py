@@ -1,0 +1,175 @@
+"""The synchronous client: `Client` and the `Job` handles it returns."""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+
+from schemas import Scenario
+
+from . import _core
+from .errors import JobTimeout, raise_for_status
+
+
+class Client:
+    """A flocklab service client.
+
+    >>> with Client("http://127.0.0.1:8000") as c:
+    ...     job = c.submit(preset="vicsek-1995").wait()
+    ...     traj = job.trajectory(stride=10)
+
+    `transport` is passed to httpx (tests use `httpx.MockTransport` or a WSGI/ASGI
+    transport); the underlying httpx client is created on first use.
+    """
+
+    def __init__(self, base_url: str = _core.DEFAULT_URL, api_key: str | None = None, *,
+                 transport: httpx.BaseTransport | None = None, timeout: float = 30.0):
+        self.base_url = base_url.rstrip("/")
+        self.timeout = timeout
+        self._api_key = api_key
+        self._transport = transport
+        self._http: httpx.Client | None = None
+
+    @property
+    def http(self) -> httpx.Client:
+        if self._http is None:
+            self._http = httpx.Client(base_url=self.base_url, headers=_core.headers(self._api_key),
+                                      transport=self._transport, timeout=self.timeout)
+        return self._http
+
+    def close(self) -> None:
+        if self._http is not None:
+            self._http.close()
+            self._http = None
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def request(self, method: str, path: str, **kwargs: Any) -> httpx.Response:
+        """Send a request; raise the status's APIError subclass on 4xx/5xx."""
+        response = self.http.request(method, path, **kwargs)
+        raise_for_status(response)
+        return response
+
+    # -- jobs -----------------------------------------------------------------------------
+
+    def submit(self, scenario: Scenario | dict[str, Any] | None = None, *,
+               preset: str | None = None, overrides: dict[str, Any] | None = None,
+               timeout_seconds: float | None = None, idempotency_key: str | None = None
+               ) -> Job:
+        """Submit a scenario (a `Scenario` or a dict) or a preset; returns the queued job."""
+        body = _core.submission(scenario, preset, overrides, timeout_seconds)
+        hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
+        return Job(self, self.request("POST", "/v1/jobs", json=body, headers=hdrs).json())
+
+    def job(self, job_id: str) -> Job:
+        return Job(self, self.request("GET", f"/v1/jobs/{job_id}").json())
+
+    def jobs(self, status: str | Sequence[str] | None = None, model: str | None = None,
+             page_size: int = 100) -> Iterator[Job]:
+        """Every job, newest first, fetched a page at a time."""
+        params: dict[str, Any] = {"limit": page_size}
+        if status is not None:
+            params["status"] = [status] if isinstance(status, str) else list(status)
+        if model is not None:
+            params["model"] = model
+        while True:
+            page = self.request("GET", "/v1/jobs", params=params).json()
+            for item in page["items"]:
+                yield Job(self, item)
+            if not page["next_cursor"]:
+                return
+            params["cursor"] = page["next_cursor"]
+
+    # -- catalog --------------------------------------------------------------------------
+
+    def models(self) -> list[dict[str, Any]]:
+        return self.request("GET", "/v1/models").json()
+
+    def model_schema(self, kind: str) -> dict[str, Any]:
+        return self.request("GET", f"/v1/models/{kind}").json()
+
+    def presets(self) -> list[dict[str, Any]]:
+        return self.request("GET", "/v1/presets").json()
+
+    def health(self) -> dict[str, Any]:
+        return self.request("GET", "/healthz").json()
+
+
+class Job(_core.JobState):
+    """A handle on one job; its fields are those of the last response (`refresh()`)."""
+
+    def __init__(self, client: Client, data: dict[str, Any]):
+        self.client = client
+        self.data = data
+
+    def refresh(self, wait: float = 0.0) -> Job:
+        """Re-read the job; with `wait`, long-poll until it changes or `wait` s pass."""
+        params = {"wait": wait} if wait > 0 else None
+        self.data = self.client.request("GET", f"/v1/jobs/{self.id}", params=params,
+                                        timeout=self.client.timeout + wait).json()
+        return self
+
+    def wait(self, timeout: float | None = None, progress: bool | None = None) -> Job:
+        """Block until the job has finished; returns it (check `status`, `error`).
+
+        Raises JobTimeout after `timeout` seconds. `progress` draws a bar on stderr
+        (default: when stderr is a terminal).
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        bar = _core.ProgressBar(progress)
+        try:
+            bar.update(self)
+            while not self.done:
+                remaining = _core.LONG_POLL_SECONDS if deadline is None else (
+                    deadline - time.monotonic())
+                if remaining <= 0:
+                    raise JobTimeout(f"job {self.id} still {self.status} after {timeout} s")
+                self.refresh(wait=min(_core.LONG_POLL_SECONDS, remaining))
+                bar.update(self)
+        finally:
+            bar.close()
+        return self
+
+    def cancel(self) -> Job:
+        self.data = self.client.request("POST", f"/v1/jobs/{self.id}/cancel").json()
+        return self
+
+    def metrics(self) -> dict[str, Any]:
+        """{"summary": dict, "observables": {name: float array}}."""
+        return _core.metrics(self.client.request("GET", f"/v1/jobs/{self.id}/metrics").json())
+
+    def trajectory(self, start: int | None = None, stop: int | None = None, stride: int = 1,
+                   agents: slice | Sequence[int] | str | None = None,
+                   arrays: Sequence[str] | str | None = None) -> dict[str, np.ndarray]:
+        """Frames start:stop:stride for the chosen agents: {"step", "time", "agents",
+        and each recorded array shaped (frames, agents[, components])}."""
+        params = _core.trajectory_params(start, stop, stride, agents, arrays, "npz")
+        r = self.client.request("GET", f"/v1/jobs/{self.id}/trajectory", params=params)
+        return _core.load_npz(r.content)
+
+    def download(self, path: str | Path) -> Path:
+        """Save the whole H5MD file, streamed, and check its sha-256."""
+        path = Path(path)
+        digest = hashlib.sha256()
+        with self.client.http.stream("GET", f"/v1/jobs/{self.id}/trajectory.h5") as r:
+            if r.status_code >= 400:
+                r.read()
+                raise_for_status(r)
+            expected = r.headers.get("Repr-Digest")
+            with path.open("wb") as f:
+                for chunk in r.iter_bytes():
+                    digest.update(chunk)
+                    f.write(chunk)
+        _core.check_digest(expected, digest.digest(), path)
+        return path
+

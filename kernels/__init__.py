@@ -1,0 +1,16 @@
+"""flocklab's engine: Taichi kernels behind one numpy-facing entry, `run`.
+
+Importing this package never calls `ti.init`; `run` initialises the requested backend in
+the calling process (on the calling thread) the first time it is needed.
+"""
+
+import os
+
+# Taichi prints a banner on import and a line on init to stdout, which belongs to the
+# user's output (the CLI prints its JSON summary there).
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
+
+from .engine import run  # noqa: E402
+from .result import BackendUnavailable, FrameSink, RunResult, SimulationDiverged  # noqa: E402
+
+__all__ = ["BackendUnavailable", "FrameSink", "RunResult", "SimulationDiverged", "run"]

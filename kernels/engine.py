@@ -1,0 +1,122 @@
+"""The one engine entry: `run(scenario) -> RunResult`.
+
+Called by the CLI, the service's worker processes and any batch driver alike. It knows
+nothing of jobs, HTTP or files: frames go to a `FrameSink`, progress to a callback, and
+cancellation comes from polling `should_stop` between steps.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from schemas import Scenario
+
+from . import runtime
+from .model import KERNELS, ModelKernel
+from .result import FrameSink, RunResult, SimulationDiverged
+
+ProgressFn = Callable[[int, int], None]
+StopFn = Callable[[], bool]
+PROGRESS_INTERVAL = 0.2  # seconds between progress callbacks
+STOP_INTERVAL = 0.05  # seconds between cancellation polls
+
+
+def run(
+    scenario: Scenario,
+    *,
+    sink: FrameSink | None = None,
+    on_progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+) -> RunResult:
+    """Run `scenario` to the end, to cancellation, or to numerical blow-up.
+
+    Observables are evaluated every `recording.observables_every` steps and at the end;
+    frames every `recording.every` steps and at the end. A blow-up returns status
+    "diverged" with the step and likely cause; what was recorded before it is kept.
+    """
+    rt = runtime.ensure(scenario.backend, scenario.threads)
+    from . import models  # noqa: F401  (registers every model kernel)
+
+    t0 = time.perf_counter()
+    model: ModelKernel = KERNELS[scenario.model.kind](scenario)
+    setup_seconds = time.perf_counter() - t0
+    rec = scenario.recording
+    steps = scenario.time.steps
+    dt = scenario.time.dt
+    arrays = [a for a in rec.arrays if a in type(scenario.model).state_arrays]
+    series: dict[str, list[float]] = {"step": [], "time": []}
+    status, error, done = "completed", None, 0
+    last_progress = last_poll = time.perf_counter()
+
+    def observe(step: int) -> None:
+        values = model.observe(step)
+        series["step"].append(step)
+        series["time"].append(step * dt)
+        for k, v in values.items():
+            series.setdefault(k, []).append(v)
+
+    def record(step: int) -> None:
+        if sink is not None and rec.enabled and arrays:
+            sink.frame(step, step * dt, model.frame(arrays))
+
+    try:
+        for step in range(steps):
+            if step % rec.observables_every == 0:
+                observe(step)
+            if rec.enabled and step % rec.every == 0:
+                record(step)
+            model.step(step)
+            done = step + 1
+            now = time.perf_counter()
+            if should_stop is not None and now - last_poll >= STOP_INTERVAL:
+                last_poll = now
+                if should_stop():
+                    status = "cancelled"
+                    break
+            if on_progress is not None and now - last_progress >= PROGRESS_INTERVAL:
+                last_progress = now
+                on_progress(done, steps)
+    except SimulationDiverged as exc:
+        status = "diverged"
+        error = {
+            "step": exc.step,
+            "time": exc.step * dt,
+            "quantity": exc.quantity,
+            "cause": exc.cause,
+            "message": str(exc),
+        }
+    if status != "diverged":
+        if not series["step"] or series["step"][-1] != done:
+            observe(done)
+        record(done)
+        if on_progress is not None:
+            on_progress(done, steps)
+    wall = time.perf_counter() - t0
+    obs = {k: np.asarray(v, dtype=np.float64) for k, v in series.items()}
+    final = {k: float(v[-1]) for k, v in obs.items() if len(v)}
+    tol = scenario.convergence.tolerance
+    convergence = {k: time_to_converge(obs["time"], obs[k], tol)
+                   for k in model.convergence_keys() if k in obs}
+    return RunResult(
+        status=status,
+        backend=rt.backend,
+        steps=done,
+        wall_seconds=wall,
+        n_agents=scenario.n_agents,
+        observables=obs,
+        final=final,
+        convergence=convergence,
+        extra={"setup_seconds": setup_seconds, **model.extra()},
+        error=error,
+    )
+
+
+def time_to_converge(t: np.ndarray, values: np.ndarray, tol: float) -> float | None:
+    """First time after which `values` stays below `tol` to the end (None: never)."""
+    if len(values) == 0 or not values[-1] < tol:
+        return None
+    above = np.nonzero(~(values < tol))[0]
+    return float(t[0] if len(above) == 0 else t[above[-1] + 1])

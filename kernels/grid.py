@@ -1,0 +1,294 @@
+"""Uniform-grid neighbour search: count -> scan -> stable scatter -> visit.
+
+Build (once per step, from the positions in their current storage order):
+  1. every agent gets a cell, and a bucket (the periodic box: cell index itself; the
+     unbounded plane: a hash of the cell's integer coordinates, so a swarm spread over
+     10^6 radii costs no memory per unit of area);
+  2. an exclusive scan of the bucket counts gives each bucket's start;
+  3. a *stable* scatter gives each agent its slot in bucket order (`perm`).
+The engine then permutes the state into bucket order, so neighbour reads are contiguous,
+and that order is the next step's storage order. Stability makes the order, and hence
+every floating-point sum, identical run to run: the same seed gives the same trajectory.
+
+Visit: `make_visitor(pair)` returns a Taichi function that calls `pair` for every agent k
+in the 3x3 block of cells around agent i, with the minimum-image displacement
+d = r_k - r_i. `pair` applies the distance test itself (models differ: < or <=, per-agent
+radii). On the plane, hash collisions are filtered by comparing exact cell ids, so no
+agent is ever visited twice. No bucket has a fixed capacity: nothing can overflow.
+
+Cells are a hair wider than the radius (factor 1 + 1e-9), so rounding in floor() can never
+place two agents within the radius two cells apart.
+"""
+
+import math
+
+import numpy as np
+import taichi as ti
+
+from .result import SimulationDiverged
+
+nd = ti.types.ndarray()
+_WIDEN = 1.0 + 1e-9
+# Beyond this many cells across, i32 cell coordinates (and float precision) run out.
+MAX_CELLS_ACROSS = 2**30
+
+
+def _next_pow2(x: int) -> int:
+    return 1 << max(4, (x - 1).bit_length())
+
+
+@ti.func
+def plane_cell(x, y, gf: ti.template()):
+    inv = 1.0 / gf[0]
+    return ti.math.ivec2(int(ti.floor((x - gf[2]) * inv)), int(ti.floor((y - gf[3]) * inv)))
+
+
+@ti.func
+def plane_cell_id(cx, cy):
+    # +1 keeps the coordinates of the 3x3 block around any agent non-negative.
+    return ti.cast(cx + 1, ti.i64) | (ti.cast(cy + 1, ti.i64) << 32)
+
+
+@ti.func
+def plane_bucket(cx, cy, mask):
+    h = (ti.cast(cx, ti.u32) * ti.u32(73856093)) ^ (ti.cast(cy, ti.u32) * ti.u32(19349663))
+    h ^= h >> ti.u32(13)
+    return ti.cast(h & ti.cast(mask, ti.u32), ti.i32)
+
+
+@ti.func
+def periodic_cell(x, y, gf: ti.template(), nc):
+    inv = 1.0 / gf[0]
+    return ti.math.ivec2(int(ti.floor(x * inv)) % nc, int(ti.floor(y * inv)) % nc)
+
+
+@ti.kernel
+def _bbox(pos: nd, out: nd):
+    for i in range(pos.shape[0]):
+        ti.atomic_min(out[0], pos[i, 0])
+        ti.atomic_min(out[1], pos[i, 1])
+        ti.atomic_max(out[2], pos[i, 0])
+        ti.atomic_max(out[3], pos[i, 1])
+
+
+@ti.kernel
+def _assign(
+    pos: nd, key: nd, cid: nd, count: nd, gf: nd, gi: nd, periodic: ti.template()
+):
+    for b in range(count.shape[0]):
+        count[b] = 0
+    for i in range(pos.shape[0]):
+        b = 0
+        if ti.static(periodic):
+            nc = gi[0]
+            c = periodic_cell(pos[i, 0], pos[i, 1], gf, nc)
+            b = c[0] + nc * c[1]
+        else:
+            c = plane_cell(pos[i, 0], pos[i, 1], gf)
+            b = plane_bucket(c[0], c[1], gi[1])
+            cid[i] = plane_cell_id(c[0], c[1])
+        key[i] = b
+        ti.atomic_add(count[b], 1)
+
+
+@ti.kernel
+def _scan(count: nd, start: nd, cursor: nd):
+    # Exclusive scan; serial (taichi's PrefixSumExecutor raises on the CPU backend).
+    ti.loop_config(serialize=True)
+    acc = 0
+    for b in range(count.shape[0]):
+        start[b] = acc
+        cursor[b] = acc
+        acc += count[b]
+    start[count.shape[0]] = acc
+
+
+@ti.kernel
+def _scatter_serial(key: nd, cursor: nd, perm: nd):
+    # Stable counting-sort scatter: agents keep their relative order inside a bucket.
+    ti.loop_config(serialize=True)
+    for i in range(key.shape[0]):
+        b = key[i]
+        perm[i] = cursor[b]
+        cursor[b] += 1
+
+
+@ti.kernel
+def _scatter_parallel(key: nd, cursor: nd, perm: nd, src: nd, start: nd):
+    # GPU variant: atomic slots, then each bucket sorted by old index -> the stable order.
+    for i in range(key.shape[0]):
+        src[ti.atomic_add(cursor[key[i]], 1)] = i
+    for b in range(start.shape[0] - 1):
+        lo = start[b]
+        for k in range(lo + 1, start[b + 1]):
+            v = src[k]
+            m = k - 1
+            while m >= lo and src[m] > v:
+                src[m + 1] = src[m]
+                m -= 1
+            src[m + 1] = v
+    for k in range(key.shape[0]):
+        perm[src[k]] = k
+
+
+@ti.kernel
+def permute_rows(src: nd, dst: nd, perm: nd):
+    """dst[perm[i], :] = src[i, :] for an (N, C) array."""
+    for i in range(src.shape[0]):
+        for c in range(src.shape[1]):
+            dst[perm[i], c] = src[i, c]
+
+
+@ti.kernel
+def permute(src: nd, dst: nd, perm: nd):
+    """dst[perm[i]] = src[i] for an (N,) array."""
+    for i in range(src.shape[0]):
+        dst[perm[i]] = src[i]
+
+
+class Grid:
+    """Neighbour grid for N agents with interaction radius `radius`.
+
+    `periodic_L` set: the box [0, L)^2 with wrap-around; None: the unbounded plane.
+    After `build(pos)`, `perm[i]` is agent i's slot in bucket order, and `view()` is what a
+    visitor needs (bucket starts, cell ids, geometry) as a static tuple for kernels.
+    """
+
+    def __init__(self, n: int, radius: float, periodic_L: float | None, serial: bool = True):
+        self.n = n
+        self.radius = float(radius)
+        self.periodic = periodic_L is not None
+        self.serial = serial
+        cell = self.radius * _WIDEN
+        if self.periodic:
+            L = float(periodic_L)
+            # Cap the cell count near 4 per agent: a sparse box then gets wider cells
+            # (more candidates each) instead of memory per unit of area.
+            nc = max(1, min(int(L / cell), math.isqrt(max(4 * n, 16))))
+            self.nc = nc
+            n_buckets = nc * nc
+            cell = L / nc
+        else:
+            L = 0.0
+            self.nc = 0
+            n_buckets = _next_pow2(2 * n)
+        self.n_buckets = n_buckets
+        self.gf = np.array([cell, L, 0.0, 0.0], dtype=np.float64)
+        self.gi = np.array([self.nc, n_buckets - 1], dtype=np.int32)
+        self._gf_nd = ti.ndarray(ti.f64, shape=4)
+        self._gi_nd = ti.ndarray(ti.i32, shape=2)
+        self._gi_nd.from_numpy(self.gi)
+        self._gf_nd.from_numpy(self.gf)
+        self.key = ti.ndarray(ti.i32, shape=n)
+        self.perm = ti.ndarray(ti.i32, shape=n)
+        self.count = ti.ndarray(ti.i32, shape=n_buckets)
+        self.start = ti.ndarray(ti.i32, shape=n_buckets + 1)
+        self.cursor = ti.ndarray(ti.i32, shape=n_buckets)
+        # Exact cell ids filter hash collisions on the plane (unused in the box).
+        self.cid = ti.ndarray(ti.i64, shape=n if not self.periodic else 1)
+        self.cid_sorted = ti.ndarray(ti.i64, shape=n if not self.periodic else 1)
+        self._src = None if serial else ti.ndarray(ti.i32, shape=n)
+        self._bb = ti.ndarray(ti.f64, shape=4)
+
+    def build(self, pos: ti.Ndarray, step: int = 0) -> None:
+        """Bucket the agents at `pos` ((N, 2), current storage order) and compute `perm`."""
+        if not self.periodic:
+            self._bb.from_numpy(np.array([np.inf, np.inf, -np.inf, -np.inf]))
+            _bbox(pos, self._bb)
+            bb = self._bb.to_numpy()
+            extent = max(bb[2] - bb[0], bb[3] - bb[1])
+            if not np.isfinite(extent):
+                raise SimulationDiverged(step, "position", "a position became non-finite")
+            if extent / self.gf[0] > MAX_CELLS_ACROSS:
+                raise SimulationDiverged(
+                    step,
+                    "position",
+                    f"the swarm spans {extent:.3g} length units, over 2^30 neighbour radii "
+                    "(agents escaping: dt too large or forces unbounded)",
+                )
+            self.gf[2], self.gf[3] = bb[0], bb[1]
+            self._gf_nd.from_numpy(self.gf)
+        _assign(pos, self.key, self.cid, self.count, self._gf_nd, self._gi_nd, self.periodic)
+        _scan(self.count, self.start, self.cursor)
+        if self.serial:
+            _scatter_serial(self.key, self.cursor, self.perm)
+        else:
+            _scatter_parallel(self.key, self.cursor, self.perm, self._src, self.start)
+        if not self.periodic:
+            permute(self.cid, self.cid_sorted, self.perm)
+
+    def view(self) -> tuple:
+        """Static tuple for kernels: (start, cell ids in bucket order, gf, gi)."""
+        return (self.start, self.cid_sorted, self._gf_nd, self._gi_nd)
+
+
+def make_visitor(pair):
+    """Return a Taichi function `visit(i, xi, acc, pos, G, S, periodic)` that folds
+    `acc = pair(i, k, d, acc, S)` over every agent k in the cells around position xi,
+    where pos is in bucket order and d = pos[k] - xi (minimum image in the box)."""
+
+    @ti.func
+    def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
+              periodic: ti.template()):
+        start, cid, gf, gi = ti.static(G[0], G[1], G[2], G[3])
+        if ti.static(periodic):
+            nc = gi[0]
+            L = gf[1]
+            c = periodic_cell(xi[0], xi[1], gf, nc)
+            if nc >= 3:
+                # Rows of three x-adjacent cells are one contiguous bucket range unless
+                # the row crosses the seam; a cell across the seam is read with the
+                # shift +-L that makes r_k + shift the image nearest r_i.
+                for b in range(3):
+                    ry = c[1] + b - 1
+                    by = (ry + nc) % nc
+                    sy = ti.cast(ry - by, ti.f64) / nc * L
+                    row = nc * by
+                    if c[0] >= 1 and c[0] + 1 < nc:
+                        for k in range(start[row + c[0] - 1], start[row + c[0] + 2]):
+                            d = ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] + sy - xi[1])
+                            acc = pair(i, k, d, acc, S)
+                    else:
+                        for a in range(3):
+                            rx = c[0] + a - 1
+                            bx = (rx + nc) % nc
+                            sx = ti.cast(rx - bx, ti.f64) / nc * L
+                            for k in range(start[row + bx], start[row + bx + 1]):
+                                d = ti.math.vec2(pos[k, 0] + sx - xi[0],
+                                                 pos[k, 1] + sy - xi[1])
+                                acc = pair(i, k, d, acc, S)
+            else:
+                # One or two cells across: visit each once, minimum image per pair.
+                for a in range(nc):
+                    for b in range(nc):
+                        bucket = (c[0] + a) % nc + nc * ((c[1] + b) % nc)
+                        for k in range(start[bucket], start[bucket + 1]):
+                            d = ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] - xi[1])
+                            d -= L * ti.round(d / L)
+                            acc = pair(i, k, d, acc, S)
+        else:
+            c = plane_cell(xi[0], xi[1], gf)
+            for a in range(3):
+                tx = c[0] + a - 1
+                for b in range(3):
+                    ty = c[1] + b - 1
+                    want = plane_cell_id(tx, ty)
+                    bucket = plane_bucket(tx, ty, gi[1])
+                    for k in range(start[bucket], start[bucket + 1]):
+                        if cid[k] == want:
+                            d = ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] - xi[1])
+                            acc = pair(i, k, d, acc, S)
+        return acc
+
+    return visit
+
+
+@ti.func
+def within(d2, r2, inclusive: ti.template()):
+    """The neighbourhood test: |d|^2 <= r^2 or |d|^2 < r^2."""
+    res = 0
+    if ti.static(inclusive):
+        res = ti.cast(d2 <= r2, ti.i32)
+    else:
+        res = ti.cast(d2 < r2, ti.i32)
+    return res

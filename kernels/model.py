@@ -1,0 +1,58 @@
+"""The interface every model kernel implements, and the kernel registry.
+
+The engine drives a `ModelKernel` through `observe -> step -> ... -> observe`; it knows
+nothing of any model's equations. A new model family is one module with a subclass
+decorated `@register_kernel`, imported in `kernels/models.py`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar
+
+import numpy as np
+
+from schemas import Scenario
+
+
+class ModelKernel(ABC):
+    """One model's state and step on the Taichi backend.
+
+    Subclasses allocate their state in `__init__` (from `kernels.initial`), advance it in
+    `step`, and report observables at the current state in `observe`.
+    """
+
+    kind: ClassVar[str]
+
+    def __init__(self, scenario: Scenario):
+        self.scenario = scenario
+
+    @abstractmethod
+    def step(self, step: int) -> None:
+        """Advance from step `step` to `step + 1`. Raises SimulationDiverged on blow-up."""
+
+    @abstractmethod
+    def observe(self, step: int) -> dict[str, float]:
+        """Observables of the current state (time step * dt). Scalars only."""
+
+    @abstractmethod
+    def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
+        """The requested per-agent arrays this model has, in agent-id order."""
+
+    def convergence_keys(self) -> list[str]:
+        """Observables that go to zero on convergence (time-to-converge is reported)."""
+        return []
+
+    def extra(self) -> dict[str, Any]:
+        """Run-level results beyond the time series (added to the summary)."""
+        return {}
+
+
+KERNELS: dict[str, type[ModelKernel]] = {}
+
+
+def register_kernel(cls: type[ModelKernel]) -> type[ModelKernel]:
+    if cls.kind in KERNELS:
+        raise RuntimeError(f"kernel for {cls.kind!r} registered twice")
+    KERNELS[cls.kind] = cls
+    return cls

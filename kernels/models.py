@@ -1,0 +1,6 @@
+"""Every model family's kernel: one registration line per family."""
+
+from . import vicsek  # noqa: F401
+from .model import KERNELS
+
+__all__ = ["KERNELS"]

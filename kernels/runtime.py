@@ -1,0 +1,131 @@
+"""Taichi initialisation: one backend per process, resolved carefully, never on import.
+
+Facts this module relies on (../shared/RELIABILITY.md, taichi 1.7.4):
+- `ti.init(arch=ti.gpu)` or `opengl` can segfault on a machine without a GPU, and
+  `arch=ti.cuda` silently falls back to the CPU. So "auto" probes each GPU backend in a
+  spawned child process first, and every explicit GPU request is checked after init.
+- Kernels may only be launched from the thread that called `ti.init`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import multiprocessing as mp
+import os
+import threading
+from dataclasses import dataclass
+
+from .result import BackendUnavailable
+
+_GPU_ORDER = ("cuda", "vulkan")
+# Taichi's arch names for what we call "cpu".
+_ARCH_NAMES = {"x64": "cpu", "arm64": "cpu"}
+
+
+@dataclass(frozen=True)
+class Runtime:
+    backend: str  # what actually runs: "cpu", "cuda" or "vulkan"
+    threads: int | None
+    thread_id: int
+
+
+_current: Runtime | None = None
+_probe_cache: dict[str, bool] = {}
+
+
+def default_threads() -> int:
+    """CPU threads: FLOCKLAB_THREADS, else the cores this process may use (cgroup-aware)."""
+    env = os.environ.get("FLOCKLAB_THREADS")
+    if env:
+        return max(1, int(env))
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - non-Linux
+        return os.cpu_count() or 1
+
+
+def _probe_child(arch_name: str, q: mp.Queue) -> None:  # pragma: no cover - runs in a child
+    import taichi as ti
+
+    try:
+        ti.init(arch=getattr(ti, arch_name), enable_fallback=False, log_level=ti.ERROR)
+        q.put(ti.lang.impl.current_cfg().arch.name == arch_name)  # no silent CPU fallback
+    except Exception:
+        q.put(False)
+
+
+def gpu_available(arch_name: str, timeout: float = 60.0) -> bool:
+    """Whether `arch_name` initialises in a fresh spawned process (a crash there is safe)."""
+    if arch_name not in _probe_cache:
+        ctx = mp.get_context("spawn")
+        q: mp.Queue = ctx.Queue()
+        p = ctx.Process(target=_probe_child, args=(arch_name, q), daemon=True)
+        p.start()
+        p.join(timeout)
+        ok = False
+        if p.exitcode == 0 and not q.empty():
+            ok = bool(q.get())
+        if p.is_alive():
+            p.kill()
+        _probe_cache[arch_name] = ok
+    return _probe_cache[arch_name]
+
+
+def resolve_backend(requested: str) -> str:
+    """The backend to start: "auto" takes the first working GPU, else the CPU; an explicit
+    GPU request is probed in a child first, since a failed GPU init may kill the process."""
+    if requested == "auto":
+        return next((a for a in _GPU_ORDER if gpu_available(a)), "cpu")
+    if requested in _GPU_ORDER and not gpu_available(requested):
+        raise BackendUnavailable(
+            f"backend {requested!r} is not available on this machine (no working "
+            f"{requested} device); use backend 'cpu' or 'auto'"
+        )
+    return requested
+
+
+def ensure(requested: str, threads: int | None = None) -> Runtime:
+    """Initialise Taichi for `requested` in this process (idempotent for the same choice).
+
+    Switching backend or thread count re-initialises Taichi (`ti.reset` + `ti.init`).
+    """
+    global _current
+    import taichi as ti
+
+    backend = resolve_backend(requested)
+    n_threads = threads or default_threads()
+    if _current is not None and _current.backend == backend and _current.threads == n_threads:
+        if _current.thread_id != threading.get_ident():
+            raise RuntimeError("Taichi kernels must run on the thread that called ti.init")
+        return _current
+    if _current is not None:
+        ti.reset()
+    arch = getattr(ti, backend)
+    kwargs: dict = {
+        "arch": arch,
+        "default_fp": ti.f64,
+        "default_ip": ti.i32,
+        "offline_cache": True,
+        "log_level": ti.WARN,
+        "enable_fallback": False,
+        # No FMA contraction or reassociation: distances computed here must equal the
+        # brute-force reference bit for bit, so pairs exactly at the radius agree.
+        "fast_math": False,
+    }
+    if backend == "cpu":
+        kwargs["cpu_max_num_threads"] = n_threads
+    cache_dir = os.environ.get("FLOCKLAB_TAICHI_CACHE")
+    if cache_dir:
+        kwargs["offline_cache_file_path"] = cache_dir
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):  # "[Taichi] Starting on arch=..."
+            ti.init(**kwargs)
+    except Exception as exc:  # Taichi raises plain RuntimeError/AssertionError
+        raise BackendUnavailable(f"backend {backend!r} failed to initialise: {exc}") from exc
+    ran = ti.lang.impl.current_cfg().arch.name
+    if _ARCH_NAMES.get(ran, ran) != backend:
+        ti.reset()
+        raise BackendUnavailable(f"backend {backend!r} requested but Taichi started {ran!r}")
+    _current = Runtime(backend, n_threads, threading.get_ident())
+    return _current

@@ -1,0 +1,229 @@
+"""M1 kernel: Vicsek and the Jadbabaie–Lin–Morse heading rules (paper 001).
+
+One step, synchronous for all agents (state at t read, state at t+1 written elsewhere):
+  S_i = sums over the closed neighbourhood N_i ∪ {i}, N_i = {j : |r_ij| <= r} (eq. 2 text)
+  vicsek    theta_i' = atan2(sum sin theta_j, sum cos theta_j) + xi_i
+  average   theta_i' = sum theta_j / (1 + n_i)                       (eq. 1-2, F = (I+D)^-1 (A+I))
+  laplacian theta_i' = theta_i - ((1 + n_i) theta_i - sum theta_j) / g   (eq. 17-18)
+  leader    as average, with agent 0 (the leader) in the sums whenever within r and its
+            own heading held at theta_0 (eq. 22: its b_i theta_0 term)
+  x_i' = x_i + v0 dt (cos phi_i, sin phi_i), phi = theta (old, default) or theta'.
+xi_i = eta (u - 1/2), u from the counter-based hash of (seed, step, agent id).
+"""
+
+from functools import cache
+from typing import Any
+
+import numpy as np
+import taichi as ti
+
+from schemas import PeriodicBox, Scenario, VicsekParams
+
+from . import rng
+from .graph import MetricGraph, count_roots, reset_parent
+from .grid import Grid, make_visitor, within
+from .initial import initial_state
+from .layout import SortedState
+from .model import ModelKernel, register_kernel
+from .result import SimulationDiverged
+
+nd = ti.types.ndarray()
+RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
+# prm slots
+_R2, _V0DT, _ETA, _G, _L, _THETA0 = range(6)
+
+
+@ti.kernel
+def _unit_vectors(theta: nd, ew: nd):
+    for i in range(theta.shape[0]):
+        ew[i, 0] = ti.cos(theta[i])
+        ew[i, 1] = ti.sin(theta[i])
+
+
+@cache
+def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool):
+    """Compile-time specialised step for one rule and geometry."""
+
+    @ti.func
+    def pair(i, k, d, acc, S: ti.template()):
+        ew, theta, prm = ti.static(S[0], S[1], S[2])
+        # Branch-free accumulation: w is 1 for a neighbour, 0 otherwise.
+        w = ti.cast(within(d.dot(d), prm[_R2], inclusive), ti.f64)
+        if ti.static(rule == RULES["vicsek"]):
+            acc += w * ti.math.vec3(ew[k, 0], ew[k, 1], 1.0)
+        else:
+            acc += w * ti.math.vec3(theta[k], 0.0, 1.0)
+        return acc
+
+    visit = make_visitor(pair)
+
+    @ti.kernel
+    def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, prm: nd,
+             key: ti.u32, bad: nd, start: nd, cid: nd, gf: nd, gi: nd):
+        for i in range(pos.shape[0]):
+            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+            acc = visit(i, xi, ti.math.vec3(0.0), pos, ti.static((start, cid, gf, gi)),
+                        ti.static((ew, theta, prm)), periodic)
+            th = theta[i]
+            new = th
+            if ti.static(rule == RULES["vicsek"]):
+                new = ti.atan2(acc[1], acc[0])
+            elif ti.static(rule == RULES["laplacian"]):
+                new = th - (acc[2] * th - acc[0]) / prm[_G]
+            else:
+                new = acc[0] / acc[2]
+            if prm[_ETA] > 0.0:
+                new += prm[_ETA] * (rng.uniform(key, ids[i]) - 0.5)
+            if ti.static(rule == RULES["leader"]):
+                if ids[i] == 0:
+                    new = prm[_THETA0]
+            phi = th
+            if ti.static(move_new):
+                phi = new
+            x = xi + prm[_V0DT] * ti.math.vec2(ti.cos(phi), ti.sin(phi))
+            if ti.static(periodic):
+                L = prm[_L]
+                x -= L * ti.floor(x / L)
+                for c in ti.static(range(2)):
+                    if x[c] >= L:  # x - L floor(x / L) can round up to L itself
+                        x[c] -= L
+            pos_out[i, 0] = x[0]
+            pos_out[i, 1] = x[1]
+            theta_out[i] = new
+            v = new + x[0] + x[1]  # NaN if any term is NaN or infinite
+            if ti.math.isnan(v) or ti.math.isinf(v):
+                ti.atomic_add(bad[0], 1)
+
+    return step
+
+
+@register_kernel
+class VicsekKernel(ModelKernel):
+    kind = "vicsek"
+
+    def __init__(self, scenario: Scenario):
+        super().__init__(scenario)
+        p: VicsekParams = scenario.model  # type: ignore[assignment]
+        self.p = p
+        self.n = n = scenario.n_agents
+        self.periodic = isinstance(scenario.space, PeriodicBox)
+        L = scenario.space.L if self.periodic else 0.0
+        radius = scenario.neighbours.radius
+        init = initial_state(scenario)
+        theta = init.headings
+        if p.rule == "leader":
+            theta[0] = p.leader_heading
+        self.state = SortedState({"pos": init.positions, "theta": theta})
+        self.ew = ti.ndarray(ti.f64, shape=(n, 2))
+        self.grid = Grid(n, radius, L if self.periodic else None)
+        self.graph = MetricGraph(n, radius, scenario.inclusive, self.periodic)
+        self.prm = ti.ndarray(ti.f64, shape=8)
+        prm = np.zeros(8)
+        prm[[_R2, _V0DT, _ETA, _G, _L, _THETA0]] = [
+            radius * radius, p.v0 * scenario.time.dt, p.eta, p.g or 1.0, L, p.leader_heading,
+        ]
+        self.prm.from_numpy(prm)
+        self.bad = ti.ndarray(ti.i32, shape=1)
+        self.kernel = step_kernel(
+            RULES[p.rule], scenario.inclusive, self.periodic, p.position_update == "new_heading"
+        )
+        track = p.track_linked_intervals
+        self.track = n <= 100_000 if track is None else track
+        if self.track:
+            self.parent_u = ti.ndarray(ti.i32, shape=n)
+            reset_parent(self.parent_u)
+            self.linked = {"count": 0, "longest": 0, "open_since": 0}
+        self._sorted_for = -1
+
+    def _sort(self, step: int) -> None:
+        if self._sorted_for != step:
+            self.grid.build(self.state["pos"], step)
+            self.state.resort(self.grid)
+            self._sorted_for = step
+
+    def step(self, step: int) -> None:
+        self._sort(step)
+        st = self.state
+        if self.track:
+            self._track_linked(step)
+        if self.p.rule == "vicsek" or self.p.position_update == "old_heading":
+            _unit_vectors(st["theta"], self.ew)
+        self.bad.fill(0)
+        self.kernel(
+            st["pos"], st["theta"], self.ew, st.ids, st.scratch("pos"), st.scratch("theta"),
+            self.prm, rng.step_key(self.scenario.seed, 0, step), self.bad, *self.grid.view(),
+        )
+        st.swap("pos")
+        st.swap("theta")
+        if self.bad.to_numpy()[0]:
+            raise SimulationDiverged(
+                step, "heading/position",
+                "non-finite input (v0 * dt or the initial state too large for float64)",
+            )
+
+    def _track_linked(self, step: int) -> None:
+        """Theorem 2: contiguous intervals over which the union of the graphs is connected."""
+        st = self.state
+        self.graph.union_edges(self.grid, st["pos"], st.ids, parent=self.parent_u)
+        if count_roots(self.parent_u) == 1:
+            lk = self.linked
+            lk["count"] += 1
+            lk["longest"] = max(lk["longest"], step + 1 - lk["open_since"])
+            lk["open_since"] = step + 1
+            reset_parent(self.parent_u)
+
+    def observe(self, step: int) -> dict[str, float]:
+        self._sort(step)
+        st = self.state
+        theta = st["theta"].to_numpy()
+        c, s = np.cos(theta), np.sin(theta)
+        obs = {"polarization": float(np.hypot(c.sum(), s.sum()) / self.n)}
+        if self.p.rule == "vicsek":
+            obs["heading_spread"] = circular_spread(theta)
+        else:
+            obs["heading_spread"] = float(theta.max() - theta.min())
+        if self.p.rule == "leader":
+            obs["leader_error"] = float(np.abs(theta - self.p.leader_heading).max())
+        obs.update(self.graph.observe(self.grid, st["pos"], st.ids))
+        if self.track:
+            obs["linked_intervals"] = float(self.linked["count"])
+        return obs
+
+    def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
+        ids = self.state.ids_numpy()
+        out = {}
+        if "position" in arrays:
+            out["position"] = self.state.in_id_order("pos", ids)
+        if "heading" in arrays:
+            out["heading"] = self.state.in_id_order("theta", ids)
+        if "velocity" in arrays:
+            th = self.state.in_id_order("theta", ids)
+            out["velocity"] = self.p.v0 * np.stack([np.cos(th), np.sin(th)], axis=1)
+        return out
+
+    def convergence_keys(self) -> list[str]:
+        keys = ["heading_spread"]
+        if self.p.rule == "leader":
+            keys.append("leader_error")
+        return keys
+
+    def extra(self) -> dict[str, Any]:
+        if not self.track:
+            return {}
+        return {
+            "linked_intervals": {
+                "count": self.linked["count"],
+                "longest_steps": self.linked["longest"],
+                "open_since_step": self.linked["open_since"],
+            }
+        }
+
+
+def circular_spread(theta: np.ndarray) -> float:
+    """Length of the shortest arc holding every heading: 2 pi minus the largest gap."""
+    a = np.sort(np.mod(theta, 2 * np.pi))
+    if a.size < 2:
+        return 0.0
+    gaps = np.diff(a)
+    wrap = a[0] + 2 * np.pi - a[-1]
+    return float(2 * np.pi - max(gaps.max(), wrap))

@@ -1,0 +1,41 @@
+"""flocklab's wire contract: pydantic only (no taichi, no fastapi)."""
+
+from .catalog import MODELS, ModelParams, describe_models
+from .common import (
+    Box,
+    Disc,
+    ExplicitInitial,
+    Neighbours,
+    PeriodicBox,
+    Plane,
+    RandomInitial,
+    Recording,
+    TimeSpec,
+)
+from .presets import PRESETS, get_preset
+from .problems import FieldError, Problem, field_errors, parse_json_strict
+from .scenario import Scenario
+from .vicsek import VicsekParams
+
+__all__ = [
+    "MODELS",
+    "PRESETS",
+    "Box",
+    "Disc",
+    "ExplicitInitial",
+    "FieldError",
+    "ModelParams",
+    "Neighbours",
+    "PeriodicBox",
+    "Plane",
+    "Problem",
+    "RandomInitial",
+    "Recording",
+    "Scenario",
+    "TimeSpec",
+    "VicsekParams",
+    "describe_models",
+    "field_errors",
+    "get_preset",
+    "parse_json_strict",
+]

@@ -1,0 +1,80 @@
+"""The model registry on the schema side: one parameter class per model family.
+
+A model family registers its parameter class here (one line in `schemas/__init__.py`
+imports the module, whose class is decorated with `@register_model`). The engine's kernel
+registry must hold exactly the same kinds (a test checks it).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from .base import Strict
+
+if TYPE_CHECKING:
+    from .scenario import Scenario
+
+
+class ModelParams(Strict):
+    """Base of every model's parameter block. Subclasses set `kind: Literal[...]`."""
+
+    paper: ClassVar[str] = ""
+    equations: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+    # Whether the paper's neighbourhood test is |r_ij| <= r (True) or < r (False).
+    paper_inclusive: ClassVar[bool] = True
+    # Per-agent state the model has, a subset of ("position", "velocity", "heading").
+    state_arrays: ClassVar[tuple[str, ...]] = ("position",)
+
+    def check_scenario(self, scenario: Scenario) -> None:
+        """Cross-block checks (raise ValueError with a user-facing message)."""
+
+
+MODELS: dict[str, type[ModelParams]] = {}
+
+
+def register_model(cls: type[ModelParams]) -> type[ModelParams]:
+    kind = cls.model_fields["kind"].default
+    if kind in MODELS:
+        raise RuntimeError(f"model kind {kind!r} registered twice")
+    MODELS[kind] = cls
+    return cls
+
+
+def describe_models() -> list[dict[str, Any]]:
+    """The catalog: every model with its parameters, defaults, units and equations."""
+    out = []
+    for kind, cls in MODELS.items():
+        params = []
+        for name, f in cls.model_fields.items():
+            if name == "kind":
+                continue
+            params.append(
+                {
+                    "name": name,
+                    "default": None if f.is_required() else _jsonable(f.default),
+                    "required": f.is_required(),
+                    "description": f.description or "",
+                }
+            )
+        out.append(
+            {
+                "kind": kind,
+                "summary": cls.summary,
+                "paper": cls.paper,
+                "equations": cls.equations,
+                "paper_inclusive": cls.paper_inclusive,
+                "state": list(cls.state_arrays),
+                "parameters": params,
+                "json_schema": cls.model_json_schema(),
+            }
+        )
+    return out
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, Strict):
+        return v.model_dump(mode="json")
+    if isinstance(v, tuple):
+        return list(v)
+    return v

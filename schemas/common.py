@@ -1,0 +1,173 @@
+"""Blocks common to every scenario: space, neighbours, initial state, time, recording, backend."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import Field, StrictBool, field_validator, model_validator
+
+from .base import (
+    MAX_ABS_COORD,
+    NonNegativeInt,
+    NonNegativePair,
+    PositiveInt,
+    PositiveReal,
+    Real,
+    RealPair,
+    Strict,
+    Vec2,
+)
+
+MAX_AGENTS = 50_000_000
+
+
+class PeriodicBox(Strict):
+    """A square periodic box [0, L)^2 (Vicsek's setting); positions are wrapped into it."""
+
+    kind: Literal["periodic"] = "periodic"
+    L: PositiveReal = Field(description="Side length of the periodic box (length units).")
+
+
+class Plane(Strict):
+    """The unbounded plane (the control papers). The neighbour grid follows the swarm."""
+
+    kind: Literal["plane"] = "plane"
+
+
+Space = Annotated[PeriodicBox | Plane, Field(discriminator="kind")]
+
+
+class Neighbours(Strict):
+    """Metric neighbourhood |r_ij| < radius (or <= radius)."""
+
+    radius: PositiveReal = Field(description="Interaction radius (r, R or d in the papers).")
+    inclusive: StrictBool | None = Field(
+        default=None,
+        description="True: |r_ij| <= radius ('in or on' the circle); False: strict <. "
+        "null: the paper's own choice for the model.",
+    )
+
+
+class Box(Strict):
+    """Uniform random positions in an axis-aligned box."""
+
+    kind: Literal["box"] = "box"
+    low: Vec2 = Field(description="Lower-left corner.")
+    high: Vec2 = Field(description="Upper-right corner.")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Box:
+        if not (self.low[0] < self.high[0] and self.low[1] < self.high[1]):
+            raise ValueError("box needs low < high in both coordinates")
+        return self
+
+
+class Disc(Strict):
+    """Uniform random positions in a disc (uniform in area)."""
+
+    kind: Literal["disc"] = "disc"
+    center: Vec2 = (0.0, 0.0)
+    radius: PositiveReal = Field(description="Disc radius.")
+
+
+Region = Annotated[Box | Disc, Field(discriminator="kind")]
+
+
+class RandomInitial(Strict):
+    """Seeded random initial state: positions uniform in a region, headings uniform in a
+    range, speeds uniform in a range (models with a common speed ignore the speeds)."""
+
+    kind: Literal["random"] = "random"
+    N: PositiveInt = Field(description="Number of agents.", le=MAX_AGENTS)
+    region: Region | None = Field(
+        default=None, description="Where agents start; default: the whole periodic box."
+    )
+    heading_range: RealPair = Field(
+        default=(-math.pi, math.pi), description="Headings uniform in [a, b) (radians)."
+    )
+    speed_range: NonNegativePair = Field(
+        default=(0.0, 0.0), description="Speeds uniform in [a, b) (double integrators)."
+    )
+
+    @model_validator(mode="after")
+    def _ranges(self) -> RandomInitial:
+        if self.heading_range[0] > self.heading_range[1]:
+            raise ValueError("heading_range needs a <= b")
+        if self.speed_range[0] > self.speed_range[1]:
+            raise ValueError("speed_range needs a <= b")
+        return self
+
+
+class ExplicitInitial(Strict):
+    """Initial state given as arrays in agent-id order."""
+
+    kind: Literal["explicit"] = "explicit"
+    positions: list[Vec2] = Field(min_length=1, description="N positions (x, y).")
+    headings: list[Real] | None = Field(default=None, description="N headings (radians).")
+    velocities: list[Vec2] | None = Field(default=None, description="N velocities (vx, vy).")
+
+    @property
+    def N(self) -> int:
+        return len(self.positions)
+
+    @field_validator("positions")
+    @classmethod
+    def _magnitude(cls, v: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        for k, (x, y) in enumerate(v):
+            if abs(x) > MAX_ABS_COORD or abs(y) > MAX_ABS_COORD:
+                raise ValueError(f"positions[{k}] exceeds {MAX_ABS_COORD:g} in magnitude")
+        return v
+
+    @model_validator(mode="after")
+    def _lengths(self) -> ExplicitInitial:
+        for name in ("headings", "velocities"):
+            arr = getattr(self, name)
+            if arr is not None and len(arr) != self.N:
+                raise ValueError(f"{name} has {len(arr)} entries, positions has {self.N}")
+        return self
+
+
+Initial = Annotated[RandomInitial | ExplicitInitial, Field(discriminator="kind")]
+
+
+class TimeSpec(Strict):
+    """How long to run. Discrete-time models advance one step per dt."""
+
+    steps: PositiveInt = Field(description="Number of steps.", le=10**9)
+    dt: PositiveReal = Field(
+        default=1.0,
+        description="Step length (time units). Discrete-time models (M1) use it as the "
+        "time between updates; continuous-time models as the integration step.",
+    )
+
+
+class Recording(Strict):
+    """What to record and how often. Frames go to the H5MD trajectory file."""
+
+    every: NonNegativeInt = Field(
+        default=0, description="Record a frame every k steps (0: no frames; the last "
+        "frame is always recorded when k > 0)."
+    )
+    arrays: list[Literal["position", "velocity", "heading"]] = Field(
+        default=["position"],
+        description="Per-agent arrays to record; a model records those it has.",
+    )
+    max_frames: PositiveInt = Field(default=10_000, description="Refuse runs with more frames.")
+    observables_every: PositiveInt = Field(
+        default=1, description="Evaluate the observables every k steps (and at the end)."
+    )
+
+    @property
+    def enabled(self) -> bool:
+        return self.every > 0
+
+
+Backend = Literal["cpu", "cuda", "vulkan", "auto"]
+
+
+class Convergence(Strict):
+    """Tolerance for the time-to-converge report: the first recorded time after which the
+    model's convergence observable stays below the tolerance until the end."""
+
+    tolerance: PositiveReal = Field(default=1e-3, description="Tolerance (observable units).")

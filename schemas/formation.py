@@ -1,0 +1,276 @@
+"""M4: Xi–Abed formation control with virtual leaders (paper 003).
+
+First-order agents (eq. 1-2): dr_i/dt = v_Ai + v_Ri.
+  repulsion (eq. 4)  v_Ri = sum_{j in N_i} g(|r_j - r_i|) (r_j - r_i)/|r_j - r_i|,
+                     N_i = {j : |r_ij| < d}, g < 0 on (0, d), g(s) = 0 for s >= d
+  F1 (eq. 3)         v_Ai = f(|r_id - r_i|) (r_id - r_i)/|r_id - r_i|,  r_id(t) = p(t) + b_i(t)
+  F2 (eq. 5)         v_Ai = f(|r_0 - r_i|) (r_0 - r_i)/|r_0 - r_i|,     r_0(t) = p(t)
+The leader path p(t) is a straight line or a spline through waypoints, timed by arc length,
+then still at its end. F1's offsets b_i come from a named formation or are given, and a
+schedule may rotate the formation or morph it into another over time intervals.
+d is the scenario's `neighbours.radius`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Annotated, ClassVar, Literal
+
+from pydantic import Field, model_validator
+
+from .base import PositiveReal, Real, Strict, Vec2
+from .catalog import ModelParams, register_model
+from .common import Plane
+
+if TYPE_CHECKING:
+    from .scenario import Scenario
+
+MAX_WAYPOINTS = 1000
+
+
+# --- f: the attraction magnitude (continuous, increasing, f(0) = 0) ----------------------
+
+
+class LinearF(Strict):
+    """f(s) = k s (Simulation 1; Propositions 3.1-3.2)."""
+
+    kind: Literal["linear"] = "linear"
+    k: PositiveReal = Field(default=1.0, description="Gain k of f(s) = k s (1/time).")
+
+
+class QuadraticF(Strict):
+    """f(s) = c (s^2 + s) (Simulation 2 prints c = 0.02)."""
+
+    kind: Literal["quadratic"] = "quadratic"
+    c: PositiveReal = Field(default=0.02, description="c of f(s) = c (s^2 + s).")
+
+
+class SaturatingF(Strict):
+    """f(s) = v_max tanh(k s / v_max): slope k at 0, never faster than v_max."""
+
+    kind: Literal["saturating"] = "saturating"
+    k: PositiveReal = Field(default=1.0, description="Slope of f at s = 0 (1/time).")
+    v_max: PositiveReal = Field(default=10.0, description="Saturation speed (length/time).")
+
+
+Attraction = Annotated[LinearF | QuadraticF | SaturatingF, Field(discriminator="kind")]
+
+
+# --- g: the repulsion magnitude (g < 0 on (0, d), g(d) = 0, g -> -inf at 0) ---------------
+
+
+class InverseG(Strict):
+    """g(s) = -k_g (1/s - 1/d) for s < d, 0 beyond."""
+
+    kind: Literal["inverse"] = "inverse"
+    k_g: PositiveReal = Field(default=10.0, description="Gain k_g (length^2/time).")
+
+
+class InverseSquareG(Strict):
+    """g(s) = -k_g (1/s^2 - 1/d^2) for s < d, 0 beyond."""
+
+    kind: Literal["inverse_square"] = "inverse_square"
+    k_g: PositiveReal = Field(default=100.0, description="Gain k_g (length^3/time).")
+
+
+Repulsion = Annotated[InverseG | InverseSquareG, Field(discriminator="kind")]
+
+
+# --- the virtual leader's path p(t) -------------------------------------------------------
+
+
+class _Timed(Strict):
+    start: Vec2 | None = Field(
+        default=None, description="p(0); default: the initial centroid of the agents."
+    )
+    speed: PositiveReal | None = Field(
+        default=None, description="Leader speed along the path (length/time)."
+    )
+    arrival_time: PositiveReal | None = Field(
+        default=None, description="T: the time the leader reaches the end (then stays)."
+    )
+
+    @model_validator(mode="after")
+    def _one_timing(self) -> _Timed:
+        if (self.speed is None) == (self.arrival_time is None):
+            raise ValueError("give exactly one of speed and arrival_time")
+        return self
+
+
+class StraightPath(_Timed):
+    """p(t) moves on a straight line from p(0) to the target r_t, then p(t) = r_t (t >= T)."""
+
+    kind: Literal["straight"] = "straight"
+    target: Vec2 = Field(description="r_t, where the leader stops.")
+
+
+class SplinePath(_Timed):
+    """p(t) follows a natural cubic spline through p(0) and the waypoints (chord-length
+    knots) at constant speed along its arc length, then stays at the last waypoint."""
+
+    kind: Literal["spline"] = "spline"
+    waypoints: list[Vec2] = Field(
+        min_length=1, max_length=MAX_WAYPOINTS,
+        description="Points after p(0); the last is the target r_t.",
+    )
+
+    @model_validator(mode="after")
+    def _distinct(self) -> SplinePath:
+        pts = ([self.start] if self.start is not None else []) + list(self.waypoints)
+        for j in range(1, len(pts)):
+            if pts[j] == pts[j - 1]:
+                raise ValueError(f"waypoints {j - 1} and {j} coincide (counting start)")
+        return self
+
+
+Path = Annotated[StraightPath | SplinePath, Field(discriminator="kind")]
+
+
+# --- F1: the offsets b_i ------------------------------------------------------------------
+
+Shape = Literal["line", "column", "wedge", "diamond", "circle", "hex"]
+
+
+class NamedFormation(Strict):
+    """A named formation of N agents with mean-zero offsets, neighbours at distance d and no
+    two agents closer than d. Reference heading +x: column = one behind another along x,
+    line = abreast along y, wedge = a filled triangle with its apex at +x (rows 1, 2, 3...
+    of the triangular lattice), diamond = a k x k square lattice turned 45 deg (apex at +x),
+    circle = N agents on a circle with adjacent ones d apart, hex = the N triangular-lattice
+    points nearest the origin."""
+
+    kind: Literal["named"] = "named"
+    shape: Shape = Field(description="Formation shape.")
+    orientation: Real = Field(
+        default=0.0, description="Rotation of the whole shape, counter-clockwise (radians)."
+    )
+
+
+class ExplicitFormation(Strict):
+    """Offsets b_i given in agent-id order; their mean must be zero (paper condition 1)."""
+
+    kind: Literal["explicit"] = "explicit"
+    offsets: list[Vec2] = Field(min_length=1, description="N offsets b_i (x, y).")
+
+    @model_validator(mode="after")
+    def _mean_zero(self) -> ExplicitFormation:
+        n = len(self.offsets)
+        mx = math.fsum(b[0] for b in self.offsets) / n
+        my = math.fsum(b[1] for b in self.offsets) / n
+        scale = max(max(abs(b[0]), abs(b[1])) for b in self.offsets)
+        if math.hypot(mx, my) > 1e-9 * max(scale, 1.0):
+            raise ValueError(
+                f"offsets must have mean zero (paper condition 1); their mean is "
+                f"({mx:.6g}, {my:.6g})"
+            )
+        return self
+
+
+FormationSpec = Annotated[NamedFormation | ExplicitFormation, Field(discriminator="kind")]
+
+
+class FormationChange(Strict):
+    """One change of F1's formation over [start, end]: rotate the formation in force by
+    `rotate` radians about its centre, or morph it into `formation`. The blend weight
+    s(u), u = (t - start)/(end - start), is smoothstep 3u^2 - 2u^3 (velocity continuous)
+    or linear; start == end changes abruptly."""
+
+    start: Real = Field(ge=0, description="Start of the change (time).")
+    end: Real = Field(ge=0, description="End of the change (time).")
+    rotate: Real | None = Field(default=None, description="Rotation angle (radians).")
+    formation: FormationSpec | None = Field(default=None, description="Formation to morph to.")
+    relaxation: Literal["smoothstep", "linear"] = Field(
+        default="smoothstep", description="Blend profile over the interval."
+    )
+
+    @model_validator(mode="after")
+    def _valid(self) -> FormationChange:
+        if self.end < self.start:
+            raise ValueError(f"change ends ({self.end:g}) before it starts ({self.start:g})")
+        if (self.rotate is None) == (self.formation is None):
+            raise ValueError("a formation change needs exactly one of rotate and formation")
+        return self
+
+
+# --- the model ----------------------------------------------------------------------------
+
+
+@register_model
+class FormationParams(ModelParams):
+    """Xi–Abed formation control: F1 (a virtual leader per agent) or F2 (one leader)."""
+
+    paper: ClassVar[str] = "003 Xi, Abed (2005), New formation control designs with virtual leaders"
+    equations: ClassVar[str] = (
+        "dr_i/dt = v_Ai + v_Ri (eq. 1-2); v_Ri = sum g(|r_ji|) r_ji/|r_ji| over |r_ij| < d "
+        "(eq. 4); F1: v_Ai = f(|r_id - r_i|) n_di, r_id = p + b_i (eq. 3); F2: v_Ai = "
+        "f(|r_0 - r_i|) n_0i, r_0 = p (eq. 5); lag a: f(|a|) a/|a| = -q (eq. 8); V1 (eq. 10); "
+        "V2 (eq. 16); F2 formation D1-D3 (Sec. 3.2)"
+    )
+    summary: ClassVar[str] = (
+        "First-order agents tracking virtual leaders on a path, with short-range repulsion."
+    )
+    paper_inclusive: ClassVar[bool] = False
+    state_arrays: ClassVar[tuple[str, ...]] = ("position", "velocity")
+
+    kind: Literal["formation"] = "formation"
+    design: Literal["F1", "F2"] = Field(
+        default="F1", description="F1: a virtual leader per agent (eq. 3); F2: one (eq. 5)."
+    )
+    attraction: Attraction = Field(default=LinearF(), description="f, the attraction.")
+    repulsion: Repulsion = Field(default=InverseG(), description="g, the repulsion.")
+    path: Path = Field(description="The virtual leader's path p(t).")
+    formation: FormationSpec | None = Field(
+        default=None, description="F1: the offsets b_i at t = 0 (required for F1)."
+    )
+    schedule: list[FormationChange] = Field(
+        default=[], description="F1: formation changes, in time order, not overlapping."
+    )
+    lag_sign: Literal["eq8", "prop3.2"] = Field(
+        default="eq8",
+        description="Sign of the steady lag a used by the formation error: eq8 solves "
+        "f(|a|) a/|a| = -q (agents trail their leaders, which is what the dynamics do); "
+        "prop3.2 solves f(|a|) a/|a| = +q as Proposition 3.2 prints it.",
+    )
+    integrator: Literal["euler", "rk4"] = Field(
+        default="euler", description="Explicit Euler, or classical RK4 (accuracy checks)."
+    )
+    collision_distance: PositiveReal | None = Field(
+        default=None,
+        description="D1: two agents closer than this count as a collision (default d/100; "
+        "the paper's point agents collide only at distance 0).",
+    )
+    leader_tolerance: PositiveReal | None = Field(
+        default=None,
+        description="D2-D3: an agent within this distance of r_0 is 'at r_0' (default d/100).",
+    )
+
+    def check_scenario(self, scenario: Scenario) -> None:
+        if not isinstance(scenario.space, Plane):
+            raise ValueError("model formation runs on the unbounded plane: space.kind = 'plane'")
+        if scenario.neighbours is None:
+            raise ValueError("model formation needs a neighbours block: its radius is d")
+        n = scenario.n_agents
+        if self.design == "F2":
+            if self.formation is not None or self.schedule:
+                raise ValueError("design F2 has no formation or schedule (one virtual leader)")
+        else:
+            if self.formation is None:
+                raise ValueError("design F1 needs a formation (named or explicit offsets)")
+            formations = [self.formation] + [c.formation for c in self.schedule if c.formation]
+            for j, fm in enumerate(formations):
+                if isinstance(fm, ExplicitFormation) and len(fm.offsets) != n:
+                    where = "formation" if j == 0 else "a schedule formation"
+                    raise ValueError(f"{where} has {len(fm.offsets)} offsets, N = {n}")
+            for j in range(1, len(self.schedule)):
+                if self.schedule[j].start < self.schedule[j - 1].end:
+                    raise ValueError(
+                        f"schedule[{j}] starts at {self.schedule[j].start:g}, before "
+                        f"schedule[{j - 1}] ends at {self.schedule[j - 1].end:g}"
+                    )
+        f = self.attraction
+        if isinstance(f, SaturatingF) and self.path.speed is not None:
+            if self.path.speed >= f.v_max:
+                raise ValueError(
+                    f"path.speed = {self.path.speed:g} >= attraction.v_max = {f.v_max:g}: "
+                    "the agents could never keep up (eq. 8 has no solution)"
+                )

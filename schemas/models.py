@@ -1,0 +1,16 @@
+"""Every model family's parameter class: one registration line per family."""
+
+from __future__ import annotations
+
+from typing import Annotated, Union
+
+from pydantic import Field
+
+from . import vicsek_presets  # noqa: F401  (registers the M1 presets)
+from .catalog import MODELS
+from .vicsek import VicsekParams
+
+# The discriminated union of model parameter blocks, in registration order.
+ModelSpec = Annotated[Union[tuple(MODELS.values())], Field(discriminator="kind")]  # noqa: UP007
+
+__all__ = ["MODELS", "ModelSpec", "VicsekParams"]

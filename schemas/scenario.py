@@ -1,0 +1,100 @@
+"""The Scenario: the whole wire contract for one simulation run."""
+
+from __future__ import annotations
+
+from pydantic import Field, StrictInt, model_validator
+
+from .base import Strict
+from .common import (
+    Backend,
+    Convergence,
+    ExplicitInitial,
+    Initial,
+    Neighbours,
+    PeriodicBox,
+    Recording,
+    Space,
+    TimeSpec,
+)
+from .models import ModelSpec
+
+# Taichi indexes with 32-bit integers: N times the components per agent must stay below it.
+MAX_INDEX = 2**31 - 1
+SCHEMA_VERSION = 1
+
+
+class Scenario(Strict):
+    """A complete, validated simulation request. Canonical JSON is `model_dump(mode="json")`."""
+
+    schema_version: StrictInt = Field(default=SCHEMA_VERSION, ge=1, le=SCHEMA_VERSION)
+    name: str | None = Field(default=None, max_length=200, description="Free-form label.")
+    model: ModelSpec = Field(description="Model family and its parameters (by `kind`).")
+    space: Space = Field(default=PeriodicBox(L=10.0), description="Periodic box or plane.")
+    neighbours: Neighbours | None = Field(
+        default=None, description="Metric neighbourhood; required by metric models."
+    )
+    initial: Initial = Field(description="Initial state (random with the seed, or explicit).")
+    time: TimeSpec = Field(description="Steps and step length.")
+    recording: Recording = Field(default=Recording(), description="Frames and observables.")
+    convergence: Convergence = Field(default=Convergence())
+    seed: StrictInt = Field(default=0, ge=0, lt=2**63, description="Seed for all randomness.")
+    backend: Backend = Field(
+        default="cpu",
+        description="Taichi backend: cpu, cuda, vulkan, or auto (a GPU if one works, else cpu).",
+    )
+    threads: StrictInt | None = Field(
+        default=None, ge=1, le=1024, description="CPU threads (default: all allowed cores)."
+    )
+
+    @property
+    def n_agents(self) -> int:
+        return self.initial.N
+
+    @property
+    def inclusive(self) -> bool:
+        """The neighbourhood test in force: the scenario's choice or the paper's."""
+        chosen = self.neighbours.inclusive if self.neighbours else None
+        return type(self.model).paper_inclusive if chosen is None else chosen
+
+    @property
+    def n_frames(self) -> int:
+        every = self.recording.every
+        if every == 0:
+            return 0
+        # Frames at 0, k, 2k, ... and always the final state.
+        return self.time.steps // every + 1 + (1 if self.time.steps % every else 0)
+
+    @model_validator(mode="after")
+    def _cross_checks(self) -> Scenario:
+        n = self.n_agents
+        if 4 * n > MAX_INDEX:
+            raise ValueError(f"N = {n} is too large for 32-bit indexing (N * 4 < 2^31)")
+        if self.n_frames > self.recording.max_frames:
+            raise ValueError(
+                f"recording every {self.recording.every} steps gives {self.n_frames} frames "
+                f"> recording.max_frames = {self.recording.max_frames}"
+            )
+        init = self.initial
+        if isinstance(self.space, PeriodicBox) and not isinstance(init, ExplicitInitial):
+            region = init.region
+            if region is not None and region.kind == "box":
+                lo, hi = region.low, region.high
+                if min(lo) < 0 or max(hi) > self.space.L:
+                    raise ValueError("initial.region must lie inside the periodic box [0, L]^2")
+        if (
+            not isinstance(init, ExplicitInitial)
+            and init.region is None
+            and not isinstance(self.space, PeriodicBox)
+        ):
+            raise ValueError("initial.region is required on the unbounded plane")
+        if (
+            self.neighbours is not None
+            and isinstance(self.space, PeriodicBox)
+            and self.neighbours.radius * 2 > self.space.L
+        ):
+                raise ValueError(
+                    f"neighbours.radius = {self.neighbours.radius:g} exceeds L/2 = "
+                    f"{self.space.L / 2:g}: the minimum image would be ambiguous"
+                )
+        self.model.check_scenario(self)
+        return self

@@ -1,0 +1,78 @@
+"""M1: Vicsek and the Jadbabaie–Lin–Morse heading rules (paper 001).
+
+Agents move at a common speed v0 with heading theta_i; x_i(t+1) = x_i(t) + v0 dt e(theta_i).
+Heading rules over the closed neighbourhood N_i ∪ {i}, N_i = {j : |r_ij| <= r}:
+  vicsek    theta_i <- arg sum_j e^{i theta_j} + xi_i               (Vicsek et al. 1995)
+  average   theta_i <- (theta_i + sum_{N_i} theta_j) / (1 + n_i)    (eq. 1-2)
+  laplacian theta   <- theta - (1/g) L theta,  g > N                (eq. 17-18)
+  leader    theta_i <- (theta_i + sum_{N_i} theta_j + b_i theta_0) / (1 + n_i + b_i)   (eq. 22)
+xi_i is uniform in [-eta/2, eta/2] (optional for the JLM rules, whose theorems are noise-free).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, ClassVar, Literal
+
+from pydantic import Field, StrictBool
+
+from .base import NonNegativeReal, PositiveReal, Real
+from .catalog import ModelParams, register_model
+
+if TYPE_CHECKING:
+    from .scenario import Scenario
+
+Rule = Literal["vicsek", "average", "laplacian", "leader"]
+
+
+@register_model
+class VicsekParams(ModelParams):
+    """Vicsek / Jadbabaie–Lin–Morse nearest-neighbour heading rules."""
+
+    paper: ClassVar[str] = "001 Jadbabaie, Lin, Morse (2003); Vicsek et al. (1995)"
+    equations: ClassVar[str] = (
+        "vicsek: arg-sum of unit vectors + noise; average: eq. 1-2 (F = (I+D)^-1 (A+I)); "
+        "laplacian: eq. 17-18, theta <- theta - L theta / g, g > N; leader: eq. 22"
+    )
+    summary: ClassVar[str] = "Constant-speed agents aligning headings with their neighbours."
+    paper_inclusive: ClassVar[bool] = True
+    state_arrays: ClassVar[tuple[str, ...]] = ("position", "heading")
+
+    kind: Literal["vicsek"] = "vicsek"
+    rule: Rule = Field(default="vicsek", description="Heading update rule.")
+    v0: NonNegativeReal = Field(default=0.03, description="Common speed (length per time).")
+    eta: NonNegativeReal = Field(
+        default=0.0,
+        le=6.283185307179586 + 1e-12,
+        description="Noise amplitude: xi uniform in [-eta/2, eta/2] (radians), per agent "
+        "and step. 0 for the JLM theorems.",
+    )
+    g: PositiveReal | None = Field(
+        default=None, description="Laplacian rule gain denominator; must exceed N (eq. 18)."
+    )
+    leader_heading: Real = Field(
+        default=0.0, description="theta_0 of the leader (agent 0) for the leader rule (rad)."
+    )
+    position_update: Literal["old_heading", "new_heading"] = Field(
+        default="old_heading",
+        description="Move with theta(t) (synchronous, as x(t+1) = x(t) + v(t) dt) or with "
+        "theta(t+1).",
+    )
+    track_linked_intervals: StrictBool | None = Field(
+        default=None,
+        description="Track Theorem 2's 'linked together' intervals (one union-find pass per "
+        "step). null: on when N <= 100000.",
+    )
+
+    def check_scenario(self, scenario: Scenario) -> None:
+        if scenario.neighbours is None:
+            raise ValueError("model vicsek needs a neighbours block with the radius r")
+        n = scenario.n_agents
+        if self.rule == "laplacian":
+            if self.g is None:
+                raise ValueError(f"rule 'laplacian' needs g > N = {n} (eq. 18)")
+            if self.g <= n:
+                raise ValueError(f"rule 'laplacian' needs g > N: g = {self.g:g} <= N = {n}")
+        elif self.g is not None:
+            raise ValueError("g applies only to rule 'laplacian'")
+        if self.rule == "leader" and n < 2:
+            raise ValueError("rule 'leader' needs N >= 2 (agent 0 is the leader)")

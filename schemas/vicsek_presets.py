@@ -1,0 +1,34 @@
+"""Named M1 runs: Vicsek's 1995 setting and the JLM rules on a connected swarm."""
+
+from __future__ import annotations
+
+from .presets import register_preset
+
+
+@register_preset("vicsek-1995", "Vicsek et al. 1995 (Fig. 1): N=300, L=7, r=1, v0=0.03, eta=2.")
+def vicsek_1995() -> dict:
+    return {
+        "name": "vicsek-1995",
+        "model": {"kind": "vicsek", "rule": "vicsek", "v0": 0.03, "eta": 2.0},
+        "space": {"kind": "periodic", "L": 7.0},
+        "neighbours": {"radius": 1.0},
+        "initial": {"kind": "random", "N": 300},
+        "time": {"steps": 500, "dt": 1.0},
+        "recording": {"every": 10, "arrays": ["position", "heading"], "observables_every": 1},
+        "seed": 1,
+    }
+
+
+@register_preset("jlm-leader", "JLM eq. 22: 30 followers and a leader (agent 0) in a 5x5 box.")
+def jlm_leader() -> dict:
+    return {
+        "name": "jlm-leader",
+        "model": {"kind": "vicsek", "rule": "leader", "v0": 0.01, "leader_heading": 0.5},
+        "space": {"kind": "plane"},
+        "neighbours": {"radius": 2.0},
+        "initial": {"kind": "random", "N": 31, "region": {"kind": "box", "low": [0, 0],
+                                                           "high": [5, 5]}},
+        "time": {"steps": 300},
+        "recording": {"every": 10, "arrays": ["position", "heading"]},
+        "seed": 2,
+    }

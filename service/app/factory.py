@@ -1,0 +1,98 @@
+"""The app factory: settings in, a FastAPI app out, whose lifespan owns the job runtime."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from http import HTTPStatus
+from typing import Any
+
+from fastapi import Depends, FastAPI
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.openapi.utils import get_openapi
+from pydantic.json_schema import models_json_schema
+from starlette.concurrency import run_in_threadpool
+
+from schemas import Problem, Scenario
+from service.jobs import JobRuntime
+
+from .auth import require_api_key
+from .body_limit import BodyLimitMiddleware
+from .events import ChangeHub
+from .problems import PROBLEM_MEDIA_TYPE, install_problem_handlers
+from .routers import catalog, health, jobs, results
+from .settings import Settings, load_settings
+from .wire import JobRequest
+
+VERSION = "0.1.0"
+DESCRIPTION = """\
+Run published multi-agent flocking models as jobs.
+
+Submit a scenario (or a preset) to `POST /v1/jobs`, follow it with
+`GET /v1/jobs/{id}?wait=10` or the SSE stream `/v1/jobs/{id}/events`, then fetch
+`/metrics`, `/trajectory` slices or the whole `/trajectory.h5`. Every error is
+`application/problem+json` (RFC 9457). With an API key configured, send it as
+`Authorization: Bearer <key>` or `X-API-Key` on every route but `/healthz`.
+"""
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or load_settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        hub = ChangeHub(asyncio.get_running_loop())
+        runtime = JobRuntime(settings.data_dir, settings.supervisor_config(),
+                             on_change=hub.publish_threadsafe)
+        app.state.runtime, app.state.hub = runtime, hub
+        runtime.start()
+        try:
+            yield
+        finally:
+            await run_in_threadpool(runtime.close)
+
+    app = FastAPI(title="flocklab", version=VERSION, description=DESCRIPTION,
+                  lifespan=lifespan, openapi_tags=[
+                      {"name": "jobs", "description": "Submit, follow and cancel jobs."},
+                      {"name": "results", "description": "Metrics and trajectories."},
+                      {"name": "catalog", "description": "Models and presets."},
+                      {"name": "health", "description": "Probes."}])
+    app.state.settings = settings
+    install_problem_handlers(app)
+    app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
+    if settings.cors_origins:  # off unless origins are listed (R20)
+        app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins,
+                           allow_methods=["GET", "POST"],
+                           allow_headers=["Authorization", "X-API-Key", "Idempotency-Key",
+                                          "Content-Type"],
+                           expose_headers=["Location", "Retry-After", "Idempotent-Replayed"])
+    app.include_router(health.router)
+    auth = [Depends(require_api_key)]
+    for module in (jobs, results, catalog):
+        app.include_router(module.router, prefix="/v1", dependencies=auth)
+    app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
+    return app
+
+
+def _openapi(app: FastAPI) -> dict[str, Any]:
+    """FastAPI's schema, plus the hand-parsed request body's models and problem+json
+    bodies on every error response."""
+    if app.openapi_schema:
+        return app.openapi_schema
+    schema = get_openapi(title=app.title, version=app.version, description=app.description,
+                         routes=app.routes, tags=app.openapi_tags)
+    components = schema.setdefault("components", {}).setdefault("schemas", {})
+    _, defs = models_json_schema(
+        [(JobRequest, "validation"), (Scenario, "validation"), (Problem, "validation")],
+        ref_template="#/components/schemas/{model}")
+    components.update(defs["$defs"])
+    problem_ref = {"$ref": "#/components/schemas/Problem"}
+    for path in schema["paths"].values():
+        for op in path.values():
+            for code, response in op.get("responses", {}).items():
+                if code.isdigit() and int(code) >= 400:
+                    response["description"] = HTTPStatus(int(code)).phrase
+                    response["content"] = {PROBLEM_MEDIA_TYPE: {"schema": problem_ref}}
+    app.openapi_schema = schema
+    return schema

@@ -1,0 +1,190 @@
+"""/v1/jobs: submit, get (with long-poll), list, cancel, and follow progress as SSE."""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import time
+from collections.abc import AsyncIterator
+from typing import Annotated
+
+from fastapi import APIRouter, Header, Query, Request
+from fastapi.responses import JSONResponse, StreamingResponse
+from starlette.concurrency import run_in_threadpool
+
+from schemas import FieldError
+from service.jobs import IdempotencyConflict, NewJob, QueueFull
+
+from ..deps import HubDep, JobId, RuntimeDep, SettingsDep, get_job
+from ..events import wait_for_change
+from ..problems import ProblemError, invalid
+from ..submission import parse_submission
+from ..wire import EXAMPLE_SCENARIO, JobList, JobView, Status, job_view
+
+router = APIRouter(prefix="/jobs", tags=["jobs"])
+
+SSE_KEEPALIVE_SECONDS = 15.0
+
+
+@router.post(
+    "",
+    status_code=202,
+    response_model=JobView,
+    summary="Submit a scenario or a preset",
+    description="Stores the job durably, then answers 202 with a `Location` header. The "
+    "body is a `JobRequest` or a bare `Scenario`. With an `Idempotency-Key`, repeating "
+    "the same request returns the same job; another body with the same key is a 409.",
+    responses={400: {}, 401: {}, 409: {}, 413: {}, 422: {}, 429: {}, 503: {}},
+    openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
+        "schema": {"oneOf": [{"$ref": "#/components/schemas/JobRequest"},
+                             {"$ref": "#/components/schemas/Scenario"}]},
+        "examples": {
+            "scenario": {"summary": "A full scenario", "value": {"scenario": EXAMPLE_SCENARIO}},
+            "preset": {"summary": "A preset with overrides", "value": {
+                "preset": "vicsek-1995", "overrides": {"initial": {"N": 1000}}}},
+            "bare": {"summary": "A bare scenario", "value": EXAMPLE_SCENARIO},
+        }}}}},
+)
+async def submit(
+    request: Request,
+    runtime: RuntimeDep,
+    settings: SettingsDep,
+    idempotency_key: Annotated[str | None, Header(
+        alias="Idempotency-Key", min_length=1, max_length=200, pattern=r"^[\x21-\x7e]+$",
+        description="Any unique string; retries with the same key return the same job.",
+    )] = None,
+) -> JSONResponse:
+    if not runtime.supervisor.alive:
+        raise ProblemError(503, "unavailable", "Service unavailable",
+                           "the job supervisor is not running", headers={"Retry-After": "30"})
+    raw = await request.body()
+    sub = await run_in_threadpool(parse_submission, raw, settings)
+    new = NewJob(scenario=sub.canonical, model_kind=sub.scenario.model.kind,
+                 n_agents=sub.scenario.n_agents, steps_total=sub.scenario.time.steps,
+                 timeout_seconds=sub.timeout_seconds, request_hash=sub.request_hash,
+                 idempotency_key=idempotency_key)
+    try:
+        job, created = await run_in_threadpool(runtime.store.insert, new,
+                                               max_queued=settings.max_queued)
+    except QueueFull as exc:
+        retry = min(60, 1 + math.ceil(exc.queued / settings.workers))
+        raise ProblemError(429, "queue-full", "Too many queued jobs",
+                           f"{exc.queued} jobs are waiting (limit {settings.max_queued}); "
+                           f"retry later", headers={"Retry-After": str(retry)}) from None
+    except IdempotencyConflict as exc:
+        raise ProblemError(409, "idempotency-conflict", "Idempotency key reused",
+                           f"this Idempotency-Key was used for job {exc.job_id} with a "
+                           f"different request", job_id=exc.job_id) from None
+    if created:
+        runtime.supervisor.wake()
+    view = job_view(job, settings.result_ttl_seconds)
+    headers = {"Location": view.links["self"]}
+    if not created:
+        headers["Idempotent-Replayed"] = "true"
+    return JSONResponse(view.model_dump(mode="json"), status_code=202, headers=headers)
+
+
+@router.get("", response_model=JobList, summary="List jobs, newest first",
+            responses={401: {}, 422: {}})
+def list_jobs(
+    runtime: RuntimeDep,
+    settings: SettingsDep,
+    status: Annotated[list[Status] | None, Query(description="Only these statuses.")] = None,
+    model: Annotated[str | None, Query(max_length=100, description="Only this model kind.")
+                     ] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    cursor: Annotated[str | None, Query(max_length=64, description="From `next_cursor`.")
+                      ] = None,
+) -> JobList:
+    jobs = runtime.store.list(statuses=status or (), model_kind=model,
+                              before_seq=_decode_cursor(cursor), limit=limit)
+    next_cursor = _encode_cursor(jobs[-1].seq) if len(jobs) == limit else None
+    return JobList(items=[job_view(j, settings.result_ttl_seconds) for j in jobs],
+                   next_cursor=next_cursor)
+
+
+@router.get("/{job_id}", response_model=JobView, summary="Get a job",
+            responses={401: {}, 404: {}, 422: {}})
+async def get_job_route(
+    job_id: JobId,
+    runtime: RuntimeDep,
+    settings: SettingsDep,
+    hub: HubDep,
+    wait: Annotated[float, Query(ge=0, le=60, description=(
+        "Long-poll: answer as soon as the job changes (status or progress) or is "
+        "finished, or after this many seconds."))] = 0,
+) -> JobView:
+    with hub.subscribe(str(job_id)) as changed:
+        job = await run_in_threadpool(get_job, runtime, job_id)
+        if wait > 0 and not job.terminal and await wait_for_change(changed, wait):
+            job = await run_in_threadpool(get_job, runtime, job_id)
+    return job_view(job, settings.result_ttl_seconds)
+
+
+@router.post("/{job_id}/cancel", status_code=202, response_model=JobView,
+             summary="Cancel a job",
+             description="A queued job is cancelled at once; a running one is asked to stop "
+             "and is killed if it has not stopped after the grace period. Cancelling a "
+             "cancelled job is a no-op; any other finished job gives 409.",
+             responses={401: {}, 404: {}, 409: {}, 422: {}})
+def cancel(job_id: JobId, runtime: RuntimeDep, settings: SettingsDep) -> JobView:
+    get_job(runtime, job_id)
+    job = runtime.store.request_cancel(str(job_id))
+    assert job is not None
+    if job.terminal and job.status != "cancelled":
+        raise ProblemError(409, "job-finished", "Job already finished",
+                           f"the job is {job.status}; it can no longer be cancelled",
+                           status_now=job.status)
+    if job.status == "running":
+        runtime.supervisor.cancel(job.id)
+    return job_view(job, settings.result_ttl_seconds)
+
+
+@router.get("/{job_id}/events", summary="Follow a job as Server-Sent Events",
+            response_class=StreamingResponse,
+            responses={200: {"content": {"text/event-stream": {"schema": {"type": "string"}},
+                                         "application/json": None},
+                             "description": "`event: job` with the job as JSON on every "
+                             "change; `event: end` after the job finished."},
+                       401: {}, 404: {}, 422: {}})
+async def events(job_id: JobId, runtime: RuntimeDep, settings: SettingsDep, hub: HubDep
+                 ) -> StreamingResponse:
+    await run_in_threadpool(get_job, runtime, job_id)
+
+    async def stream() -> AsyncIterator[str]:
+        last = None
+        with hub.subscribe(str(job_id)) as changed:
+            while True:
+                job = await run_in_threadpool(get_job, runtime, job_id)
+                view = job_view(job, settings.result_ttl_seconds).model_dump_json()
+                if view != last:
+                    last = view
+                    yield f"event: job\ndata: {view}\n\n"
+                if job.terminal:
+                    yield "event: end\ndata: {}\n\n"
+                    return
+                if not await wait_for_change(changed, SSE_KEEPALIVE_SECONDS):
+                    yield f": keep-alive {time.time():.0f}\n\n"
+
+    return StreamingResponse(stream(), media_type="text/event-stream",
+                             headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
+
+
+def _encode_cursor(seq: int) -> str:
+    return base64.urlsafe_b64encode(json.dumps({"before": seq}).encode()).decode().rstrip("=")
+
+
+def _decode_cursor(cursor: str | None) -> int | None:
+    if cursor is None:
+        return None
+    try:
+        data = json.loads(base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)))
+        seq = data["before"]
+        if not isinstance(seq, int) or isinstance(seq, bool):
+            raise ValueError
+        return seq
+    except (ValueError, KeyError, TypeError):
+        raise invalid([FieldError(loc="query.cursor", msg="not a cursor this service issued",
+                                  type="value_error")]) from None
+

@@ -1,0 +1,107 @@
+"""Service settings: defaults that work with no configuration, overridable by environment
+variables `FLOCKLAB_<NAME>` or a settings file in dotenv format (`FLOCKLAB_<NAME>=value`
+lines) named by `--settings` or `FLOCKLAB_SETTINGS_FILE`.
+
+Precedence, highest first: command-line flags, environment, settings file, defaults.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+from pydantic import Field, SecretStr
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from service.jobs import Limits, SupervisorConfig
+
+MiB = 2**20
+GiB = 2**30
+
+
+def default_data_dir() -> Path:
+    """$XDG_DATA_HOME/flocklab, else ~/.local/share/flocklab."""
+    base = os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share"
+    return Path(base) / "flocklab"
+
+
+def available_cpus() -> int:
+    """CPUs this process may use: the affinity mask, capped by a cgroup v2 CPU quota."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        n = os.cpu_count() or 1
+    try:
+        quota, period = Path("/sys/fs/cgroup/cpu.max").read_text().split()
+        if quota != "max":
+            n = min(n, max(1, math.ceil(int(quota) / int(period))))
+    except (OSError, ValueError):
+        pass
+    return max(1, n)
+
+
+class Settings(BaseSettings):
+    """Everything an operator can set. Each field is `FLOCKLAB_<FIELD>` in the environment."""
+
+    model_config = SettingsConfigDict(env_prefix="FLOCKLAB_", extra="ignore")
+
+    data_dir: Path = Field(default_factory=default_data_dir,
+                           description="Holds jobs.sqlite3, results/ and tmp/.")
+    workers: int = Field(default=1, ge=1, le=256, description="Worker processes (jobs at once).")
+    threads_per_worker: int | None = Field(
+        default=None, ge=1, description="CPU threads per job; default: CPUs / workers.")
+    max_queued: int = Field(default=64, ge=1, description="Queued jobs before 429.")
+    max_body_bytes: int = Field(default=16 * MiB, ge=1024, description="Request body cap.")
+    max_agents: int = Field(default=2_000_000, ge=1)
+    max_steps: int = Field(default=10_000_000, ge=1)
+    max_trajectory_bytes: int = Field(default=8 * GiB, ge=1)
+    max_memory_bytes: int = Field(default=8 * GiB, ge=1)
+    max_json_bytes: int = Field(default=32 * MiB, ge=1024,
+                                description="Largest trajectory slice served as JSON.")
+    job_timeout_seconds: float = Field(default=3600.0, gt=0,
+                                       description="Default per-job wall-clock limit.")
+    max_job_timeout_seconds: float = Field(default=24 * 3600.0, gt=0)
+    cancel_grace_seconds: float = Field(default=5.0, gt=0,
+                                        description="Cooperative stop, then SIGKILL.")
+    lease_seconds: float = Field(default=30.0, gt=0)
+    max_attempts: int = Field(default=2, ge=1,
+                              description="Attempts per job; only a lost worker retries.")
+    result_ttl_seconds: float = Field(default=7 * 24 * 3600.0, gt=0)
+    worker_max_jobs: int = Field(default=500, ge=1, description="Recycle a worker after this.")
+    worker_max_rss_bytes: int = Field(default=4 * GiB, ge=0,
+                                      description="Recycle a worker above this RSS (0: never).")
+    warmup_preset: str | None = Field(
+        default="vicsek-1995", description="Preset run tiny at worker start ('' for none).")
+    api_key: SecretStr | None = Field(
+        default=None, description="When set, every route but /healthz needs it.")
+    cors_origins: list[str] = Field(default_factory=list,
+                                    description="Allowed CORS origins (JSON list); none: off.")
+
+    def limits(self) -> Limits:
+        return Limits(max_agents=self.max_agents, max_steps=self.max_steps,
+                      max_trajectory_bytes=self.max_trajectory_bytes,
+                      max_memory_bytes=self.max_memory_bytes)
+
+    def supervisor_config(self) -> SupervisorConfig:
+        threads = self.threads_per_worker or max(1, available_cpus() // self.workers)
+        return SupervisorConfig(
+            workers=self.workers,
+            threads_per_worker=threads,
+            limits=self.limits(),
+            lease_seconds=self.lease_seconds,
+            max_attempts=self.max_attempts,
+            cancel_grace_seconds=self.cancel_grace_seconds,
+            result_ttl_seconds=self.result_ttl_seconds,
+            worker_max_jobs=self.worker_max_jobs,
+            worker_max_rss_bytes=self.worker_max_rss_bytes,
+            warmup_preset=self.warmup_preset or None,
+        )
+
+
+def load_settings(settings_file: str | Path | None = None, **overrides: object) -> Settings:
+    """Settings from (highest first) `overrides`, the environment, the file, the defaults."""
+    path = settings_file or os.environ.get("FLOCKLAB_SETTINGS_FILE")
+    if path is not None and not Path(path).is_file():
+        raise FileNotFoundError(f"settings file not found: {path}")
+    return Settings(_env_file=path, **overrides)  # type: ignore[call-arg]

@@ -1,0 +1,97 @@
+"""Run a scenario and write its artifacts into a folder, atomically.
+
+The folder holds:
+  scenario.json     the canonical scenario that ran
+  summary.json      status, backend, timings, final observables, convergence times
+  observables.csv   the observables' time series (a header row, then one row per time)
+  trajectory.h5     recorded frames and observables in H5MD (see service/h5md.py)
+Everything is written into a hidden sibling folder first and renamed into place at the
+end, so the target is either complete or absent; a run that blows up still lands, with
+status "diverged" and the frames recorded before the blow-up.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from schemas import Scenario
+
+ARTIFACTS = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5")
+
+
+def write_observables_csv(path: Path, observables: dict[str, np.ndarray]) -> None:
+    names = list(observables)
+    table = np.column_stack([observables[k] for k in names]) if names else np.zeros((0, 0))
+    np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+
+
+def execute_to_dir(
+    scenario: Scenario,
+    out_dir: Path,
+    *,
+    on_progress: Callable[[int, int], None] | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    overwrite: bool = False,
+) -> dict[str, Any]:
+    """Run `scenario` and write its artifacts to `out_dir`. Returns the summary dict."""
+    import kernels  # the engine: only where a simulation runs
+
+    from .h5md import H5MDWriter
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not overwrite and any(out_dir.iterdir()):
+        raise FileExistsError(f"{out_dir} exists and is not empty")
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_dir.parent / f".{out_dir.name}.partial-{uuid.uuid4().hex[:8]}"
+    tmp.mkdir()
+    try:
+        (tmp / "scenario.json").write_text(scenario.model_dump_json(indent=2))
+        writer = H5MDWriter(tmp / "trajectory.h5", scenario)
+        try:
+            result = kernels.run(
+                scenario, sink=writer, on_progress=on_progress, should_stop=should_stop
+            )
+            writer.write_observables(result.observables)
+        finally:
+            writer.close()
+        write_observables_csv(tmp / "observables.csv", result.observables)
+        summary = {
+            "flocklab_version": "0.1.0",
+            "scenario_name": scenario.name,
+            "model": scenario.model.kind,
+            **result.summary(),
+            "frames": writer.frames,
+            "files": list(ARTIFACTS),
+        }
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
+        _fsync_dir(tmp)
+        if out_dir.exists():
+            old = out_dir.parent / f".{out_dir.name}.old-{uuid.uuid4().hex[:8]}"
+            os.rename(out_dir, old)
+            os.rename(tmp, out_dir)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.rename(tmp, out_dir)
+        return summary
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _fsync_dir(path: Path) -> None:
+    for p in path.iterdir():
+        with open(p, "rb") as fh:
+            os.fsync(fh.fileno())
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

@@ -1,0 +1,133 @@
+"""The worker process: runs jobs one after another with the engine (Taichi lives here only).
+
+Started by the supervisor with the multiprocessing *spawn* context (never fork: a child
+forked after `ti.init` hangs, taichi#6725). It talks to the supervisor over a pipe:
+
+    supervisor -> worker   ("run", order)  |  ("stop",)
+    worker -> supervisor   ("ready", pid)
+                           ("progress", token, steps_done, steps_total)
+                           ("result", token, {"summary", "checksums", "rss"}
+                                           | {"problem", "rss"})
+
+Cancellation is a shared integer the supervisor sets (read between engine steps through
+`should_stop`), so it works while the worker is busy and never reads the pipe mid-job.
+The worker also stops when its parent disappears (the API was killed): the restarted
+service re-runs the job, and this orphan must not keep the CPU.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import traceback
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+from .limits import Limits, check_limits
+from .problems import problem
+from .results import checksums
+
+log = logging.getLogger("flocklab.worker")
+
+
+def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> None:
+    """Entry point of a worker process; returns when told to stop or orphaned."""
+    parent = os.getppid()
+    # Importing the engine here, not at module level: this module is also imported by
+    # the API process (to name the target), which must never load Taichi.
+    from service.execute import execute_to_dir
+
+    def orphaned() -> bool:
+        return os.getppid() != parent
+
+    if config.get("warmup_preset"):
+        _warm_up(execute_to_dir, config["warmup_preset"], Path(config["scratch_dir"]))
+    conn.send(("ready", os.getpid()))
+    while not orphaned():
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError):
+            return
+        if msg[0] == "stop":
+            return
+        order = msg[1]
+        token = order["token"]
+
+        def on_progress(done: int, total: int, token: str = token) -> None:
+            conn.send(("progress", token, int(done), int(total)))
+
+        def should_stop() -> bool:
+            return cancel_flag.value != 0 or orphaned()
+
+        outcome = _run_order(execute_to_dir, order, on_progress, should_stop)
+        outcome["rss"] = _rss_bytes()
+        try:
+            conn.send(("result", token, outcome))
+        except (BrokenPipeError, OSError):
+            return
+
+
+def _run_order(execute_to_dir: Any, order: dict[str, Any], on_progress: Any, should_stop: Any
+               ) -> dict[str, Any]:
+    """Re-validate and run one attempt; every failure becomes a problem body."""
+    from pydantic import ValidationError
+
+    from kernels.result import BackendUnavailable
+    from schemas import Scenario, field_errors
+
+    try:
+        scenario = Scenario.model_validate_json(order["scenario"])
+    except ValidationError as exc:
+        errors = [e.model_dump() for e in field_errors(exc)]
+        return {"problem": problem("invalid-scenario", "Invalid scenario", 422,
+                                   "the stored scenario no longer validates", errors=errors)}
+    errors = check_limits(scenario, Limits(**order["limits"]))
+    if errors:
+        return {"problem": problem("limit-exceeded", "Over this service's limits", 422,
+                                   errors[0].msg, errors=[e.model_dump() for e in errors])}
+    if scenario.threads is None and order.get("threads"):
+        # Thread count = the CPUs this worker is allotted (R13); the user's choice wins.
+        scenario = scenario.model_copy(update={"threads": order["threads"]})
+    out_dir = Path(order["out_dir"])
+    try:
+        summary = execute_to_dir(scenario, out_dir, on_progress=on_progress,
+                                 should_stop=should_stop)
+    except BackendUnavailable as exc:
+        return {"problem": problem("backend-unavailable", "Backend unavailable", 503, str(exc),
+                                   backend=scenario.backend)}
+    except Exception as exc:  # an engine bug must fail this job, not the worker
+        log.error("job %s failed:\n%s", order["job_id"], traceback.format_exc())
+        return {"problem": problem("internal-error", "Internal error", 500,
+                                   f"{type(exc).__name__}: {exc}")}
+    return {"summary": summary, "checksums": checksums(out_dir)}
+
+
+def _warm_up(execute_to_dir: Any, preset: str, scratch: Path) -> None:
+    """Run a tiny version of a preset so Taichi is initialised and its kernels compiled
+    (and the offline cache written) before the first real job arrives."""
+    from schemas import PRESETS, Scenario
+
+    try:
+        spec = PRESETS[preset].build()
+        spec["time"]["steps"] = min(spec["time"]["steps"], 5)
+        if spec["initial"].get("kind") == "random":
+            spec["initial"]["N"] = min(spec["initial"]["N"], 64)
+        spec.setdefault("recording", {})["every"] = 1
+        scenario = Scenario.model_validate_json(json.dumps(spec))
+        out = scratch / f"warmup-{os.getpid()}"
+        execute_to_dir(scenario, out)
+        shutil.rmtree(out, ignore_errors=True)
+    except Exception:  # warm-up is an optimisation: a failure must not stop the worker
+        log.warning("worker warm-up with preset %r failed:\n%s", preset, traceback.format_exc())
+
+
+def _rss_bytes() -> int:
+    """Current resident set size (Linux /proc; 0 elsewhere)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError):
+        return 0

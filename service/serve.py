@@ -1,0 +1,131 @@
+"""`flocklab serve`: run the REST service with uvicorn."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="flocklab serve",
+        description="Serve the flocklab job API. Settings not given here come from "
+        "FLOCKLAB_* environment variables, then the settings file, then defaults.")
+    p.add_argument("--host", default="127.0.0.1", help="Interface to bind (default 127.0.0.1).")
+    p.add_argument("--port", type=int, default=8000, help="Port (default 8000).")
+    p.add_argument("--data-dir", type=Path, help="Job store and results folder.")
+    p.add_argument("--workers", type=int, help="Worker processes (jobs run at once).")
+    p.add_argument("--settings", type=Path, help="Settings file (dotenv: FLOCKLAB_X=value).")
+    p.add_argument("--log-level", default="info",
+                   choices=["critical", "error", "warning", "info", "debug"])
+    return p
+
+
+def cli_main(argv: list[str]) -> int:
+    """Parse `argv` (the arguments after `serve`), serve until interrupted, return 0."""
+    args = build_parser().parse_args(argv)
+    import uvicorn
+
+    from service.app import create_app, load_settings
+    from service.jobs import DataDirLocked
+
+    overrides = {k: v for k, v in (("data_dir", args.data_dir), ("workers", args.workers))
+                 if v is not None}
+    try:
+        settings = load_settings(args.settings, **overrides)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"flocklab serve: {exc}", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=args.log_level.upper(),
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    app = create_app(settings)
+    try:
+        uvicorn.run(app, host=args.host, port=args.port, log_level=args.log_level,
+                    proxy_headers=False, server_header=False, timeout_graceful_shutdown=10)
+    except DataDirLocked as exc:
+        print(f"flocklab serve: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+class ServerProcess:
+    """`flocklab serve` in a child process on 127.0.0.1: for tests and benchmarks that
+    need a real server (and need to kill it)."""
+
+    def __init__(self, data_dir: Path, *, env: dict[str, str] | None = None,
+                 port: int | None = None, log_path: Path | None = None):
+        self.data_dir = Path(data_dir)
+        self.env = env or {}
+        self.port = port or free_port()
+        self.log_path = log_path or self.data_dir.with_name(self.data_dir.name + ".log")
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def start(self, timeout: float = 60.0) -> ServerProcess:
+        """Start and wait until /healthz answers 200."""
+        import httpx
+
+        cmd = [sys.executable, "-m", "service.serve", "--port", str(self.port),
+               "--data-dir", str(self.data_dir), "--log-level", "warning"]
+        with self.log_path.open("ab") as log:
+            self.proc = subprocess.Popen(cmd, env={**os.environ, **self.env}, stdout=log,
+                                         stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"server exited with {self.proc.returncode}; see "
+                                   f"{self.log_path}")
+            with contextlib.suppress(httpx.TransportError):
+                if httpx.get(f"{self.url}/healthz", timeout=2).status_code == 200:
+                    return self
+            time.sleep(0.1)
+        self.kill()
+        raise TimeoutError(f"server not healthy after {timeout} s; see {self.log_path}")
+
+    def children(self) -> list[int]:
+        """Pids of the server's child processes (the workers), from Linux /proc."""
+        if self.proc is None:
+            return []
+        pids = []
+        for task in Path(f"/proc/{self.proc.pid}/task").glob("*"):
+            with contextlib.suppress(OSError):
+                pids += [int(p) for p in (task / "children").read_text().split()]
+        return pids
+
+    def stop(self, timeout: float = 20.0) -> int | None:
+        """SIGTERM (graceful: running jobs are re-queued), then SIGKILL if need be."""
+        if self.proc is None or self.proc.poll() is not None:
+            return self.proc.returncode if self.proc else None
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            return self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            return None
+
+    def kill(self) -> None:
+        """SIGKILL the API process (its workers notice and exit by themselves)."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+if __name__ == "__main__":
+    sys.exit(cli_main(sys.argv[1:]))

@@ -1,0 +1,50 @@
+"""Independent brute-force numpy references: O(N^2) neighbour sets and model steps.
+
+They share nothing with the engine but the counter-based noise (kernels.rng.uniform_np),
+which must be replayed to compare noisy runs step by step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def displacements(pos: np.ndarray, L: float | None) -> np.ndarray:
+    """d[i, j] = r_j - r_i, minimum image in a periodic box of side L."""
+    d = pos[None, :, :] - pos[:, None, :]
+    if L is not None:
+        d -= L * np.round(d / L)
+    return d
+
+
+def adjacency(pos: np.ndarray, r: float, L: float | None, inclusive: bool) -> np.ndarray:
+    """Boolean A[i, j]: j is a neighbour of i (i != j)."""
+    d = displacements(pos, L)
+    d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
+    a = d2 <= r * r if inclusive else d2 < r * r
+    np.fill_diagonal(a, False)
+    return a
+
+
+def vicsek_step(pos, theta, *, rule, r, L, inclusive, v0dt, eta=0.0, g=None, theta0=0.0,
+                noise=None, move_new=False):
+    """One synchronous M1 step for every rule (see kernels/vicsek.py for the equations)."""
+    a = adjacency(pos, r, L, inclusive)
+    closed = a | np.eye(len(pos), dtype=bool)
+    cnt = closed.sum(axis=1)
+    if rule == "vicsek":
+        new = np.arctan2(closed @ np.sin(theta), closed @ np.cos(theta))
+    elif rule == "laplacian":
+        lap = np.diag(a.sum(axis=1)) - a  # L = D - A  (eq. 17)
+        new = theta - lap @ theta / g  # eq. 18
+    else:  # average and leader: (I + D)^-1 (A + I) theta  (eq. 1-2, 22)
+        new = (closed @ theta) / cnt
+    if eta > 0:
+        new = new + eta * (noise - 0.5)
+    if rule == "leader":
+        new[0] = theta0
+    phi = new if move_new else theta
+    x = pos + v0dt * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    if L is not None:
+        x = np.mod(x, L)
+    return x, new

@@ -1,0 +1,73 @@
+"""Fixtures for the service tests: real `flocklab serve` processes on 127.0.0.1 with real
+SQLite stores and real spawned Taichi workers (no mocks)."""
+
+from __future__ import annotations
+
+import os
+import signal
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+
+from service.serve import ServerProcess
+
+MiB = 2**20
+
+# Limits small enough to test against without allocating anything large.
+TEST_ENV = {
+    "FLOCKLAB_WARMUP_PRESET": "",
+    "FLOCKLAB_MAX_AGENTS": "5000",
+    "FLOCKLAB_MAX_STEPS": "200000",
+    "FLOCKLAB_MAX_TRAJECTORY_BYTES": str(8 * MiB),
+    "FLOCKLAB_MAX_BODY_BYTES": str(256 * 1024),
+    "FLOCKLAB_MAX_JSON_BYTES": str(256 * 1024),
+    "FLOCKLAB_THREADS_PER_WORKER": "1",
+}
+
+
+@pytest.fixture(scope="session")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    """One shared server for the tests that do not need special settings."""
+    yield from _serve(tmp_path_factory.mktemp("shared") / "data", TEST_ENV)
+
+
+@pytest.fixture
+def make_server(tmp_path: Path) -> Iterator:
+    """Start servers with extra settings; all are stopped (and orphans reaped) after."""
+    started: list[ServerProcess] = []
+
+    def make(env: dict[str, str] | None = None, data_dir: Path | None = None) -> ServerProcess:
+        s = ServerProcess(data_dir or tmp_path / f"data{len(started)}",
+                          env={**TEST_ENV, **(env or {})})
+        started.append(s)
+        return s.start()
+
+    yield make
+    for s in started:
+        _cleanup(s)
+
+
+def _serve(data_dir: Path, env: dict[str, str]) -> Iterator[ServerProcess]:
+    s = ServerProcess(data_dir, env=env).start()
+    try:
+        yield s
+    finally:
+        _cleanup(s)
+
+
+def _cleanup(s: ServerProcess) -> None:
+    workers = s.children()
+    s.stop()
+    for pid in workers:  # only our own server's workers, by pid
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+@pytest.fixture
+def http(server: ServerProcess) -> Iterator[httpx.Client]:
+    with httpx.Client(base_url=server.url, timeout=30) as c:
+        yield c
