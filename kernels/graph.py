@@ -25,14 +25,8 @@ def find(parent: ti.template(), x):
 
 
 @ti.func
-def union(parent: ti.template(), a, b):
-    u = a
-    v = b
-    if parent[a] == parent[b]:  # cheap common case: already hooked to the same parent
-        u = v
-    else:
-        u = find(parent, a)
-        v = find(parent, b)
+def link(parent: ti.template(), u, v):
+    """Join the trees of u and v (roots, or nodes of them); returns the joined root."""
     while u != v:
         if u < v:
             u, v = v, u
@@ -42,6 +36,7 @@ def union(parent: ti.template(), a, b):
         # u was hooked elsewhere meanwhile: join what it now points to with v.
         u = find(parent, old)
         v = find(parent, v)
+    return find(parent, v)
 
 
 @ti.kernel
@@ -59,12 +54,6 @@ def count_roots(parent: nd) -> ti.i32:
     return n
 
 
-@ti.kernel
-def root_labels(parent: nd, labels: nd):
-    for i in range(parent.shape[0]):
-        labels[i] = find(parent, i)
-
-
 @cache
 def metric_graph_kernel(inclusive: bool, periodic: bool, by_id: bool):
     """Kernel: for the metric graph |d| < r (or <= r) on a built grid, write each agent's
@@ -73,15 +62,22 @@ def metric_graph_kernel(inclusive: bool, periodic: bool, by_id: bool):
     accumulate across steps, whose storage order changes)."""
 
     @ti.func
+    def node(ids: ti.template(), k):
+        res = k
+        if ti.static(by_id):
+            res = ids[k]
+        return res
+
+    @ti.func
     def pair(i, k, d, acc, S: ti.template()):
+        # acc = (degree of i, a root of i's tree): i's root is found once, not per edge.
         ids, parent, r2 = ti.static(S[0], S[1], S[2])
         if k != i and within(d.dot(d), r2[0], inclusive):
-            acc += 1
+            acc[0] += 1
             if k > i:
-                if ti.static(by_id):
-                    union(parent, ids[i], ids[k])
-                else:
-                    union(parent, i, k)
+                rk = find(parent, node(ids, k))
+                if rk != acc[1]:
+                    acc[1] = link(parent, acc[1], rk)
         return acc
 
     visit = make_visitor(pair)
@@ -91,8 +87,10 @@ def metric_graph_kernel(inclusive: bool, periodic: bool, by_id: bool):
               start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
             xi = ti.math.vec2(pos[i, 0], pos[i, 1])
-            deg[i] = visit(i, xi, 0, pos, ti.static((start, cid, gf, gi)),
-                           ti.static((ids, parent, r2)), periodic)
+            acc = ti.math.ivec2(0, find(parent, node(ids, i)))
+            acc = visit(i, xi, acc, pos, ti.static((start, cid, gf, gi)),
+                        ti.static((ids, parent, r2)), periodic)
+            deg[i] = acc[0]
 
     return graph
 

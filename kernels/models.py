@@ -1,6 +1,7 @@
 """Every model family's kernel: one registration line per family."""
 
 from . import vicsek  # noqa: F401
+from .formation import FormationKernel  # noqa: F401
 from .model import KERNELS
 
 __all__ = ["KERNELS"]

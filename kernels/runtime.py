@@ -85,6 +85,13 @@ def resolve_backend(requested: str) -> str:
     return requested
 
 
+def current() -> Runtime:
+    """The runtime `ensure` started in this process."""
+    if _current is None:
+        raise RuntimeError("Taichi is not initialised: call kernels.runtime.ensure first")
+    return _current
+
+
 def ensure(requested: str, threads: int | None = None) -> Runtime:
     """Initialise Taichi for `requested` in this process (idempotent for the same choice).
 

@@ -8,6 +8,8 @@ from pydantic import Field
 
 from . import vicsek_presets  # noqa: F401  (registers the M1 presets)
 from .catalog import MODELS
+from .formation import FormationParams  # noqa: F401  (registers M4)
+from .formation_presets import sim1  # noqa: F401  (registers the M4 presets)
 from .vicsek import VicsekParams
 
 # The discriminated union of model parameter blocks, in registration order.

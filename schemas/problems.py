@@ -39,6 +39,8 @@ def field_errors(exc: ValidationError, prefix: tuple[str | int, ...] = ()) -> li
         msg = e["msg"]
         if msg.startswith("Value error, "):
             msg = msg[len("Value error, ") :]
+        if not path and msg.startswith("model: "):  # a model's cross-block check
+            loc, msg = "model", msg[len("model: ") :]
         out.append(FieldError(loc=loc or "(root)", msg=msg, type=e["type"]))
     return out
 

@@ -96,5 +96,8 @@ class Scenario(Strict):
                     f"neighbours.radius = {self.neighbours.radius:g} exceeds L/2 = "
                     f"{self.space.L / 2:g}: the minimum image would be ambiguous"
                 )
-        self.model.check_scenario(self)
+        try:
+            self.model.check_scenario(self)
+        except ValueError as exc:
+            raise ValueError(f"model: {exc}") from exc
         return self

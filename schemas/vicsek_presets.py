@@ -4,6 +4,24 @@ from __future__ import annotations
 
 from .presets import register_preset
 
+DEFAULT_PRESET = "vicsek-default"
+
+
+@register_preset(DEFAULT_PRESET, "The embedded default (examples/vicsek.json): 10^5 Vicsek "
+                 "agents, density 4, eta = 0.5, 200 steps.")
+def vicsek_default() -> dict:
+    return {
+        "name": "vicsek-default",
+        "model": {"kind": "vicsek", "rule": "vicsek", "v0": 0.03, "eta": 0.5},
+        "space": {"kind": "periodic", "L": 158.11388300841898},
+        "neighbours": {"radius": 1.0},
+        "initial": {"kind": "random", "N": 100000},
+        "time": {"steps": 200, "dt": 1.0},
+        "recording": {"every": 50, "arrays": ["position", "heading"], "observables_every": 10},
+        "seed": 42,
+        "backend": "cpu",
+    }
+
 
 @register_preset("vicsek-1995", "Vicsek et al. 1995 (Fig. 1): N=300, L=7, r=1, v0=0.03, eta=2.")
 def vicsek_1995() -> dict:

@@ -16,6 +16,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from schemas import PRESETS, Scenario, describe_models, field_errors, get_preset, parse_json_strict
+from schemas.vicsek_presets import DEFAULT_PRESET
 
 EXIT_OK, EXIT_RUN_FAILED, EXIT_BAD_INPUT, EXIT_BACKEND = 0, 1, 2, 3
 
@@ -148,7 +149,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a scenario and write its artifacts to a folder")
-    p.add_argument("scenario", help="scenario JSON file, '-' for stdin, or preset:NAME")
+    p.add_argument("scenario", nargs="?", default=f"preset:{DEFAULT_PRESET}",
+                   help="scenario JSON file, '-' for stdin, or preset:NAME "
+                   f"(default: the embedded preset:{DEFAULT_PRESET})")
     p.add_argument("--out", required=True, help="output folder (created atomically)")
     p.add_argument("--backend", choices=["cpu", "cuda", "vulkan", "auto"],
                    help="override the scenario's backend")

@@ -1,0 +1,252 @@
+"""Taichi kernels of the double-integrator flocking models: the control law, one explicit
+step, the graph observables and the adaptive radius.
+
+Control law for agent i (paper 000 eq. 3; paper 002 eq. 3):
+  u_i = sum_{j in N_i} (v_j - v_i) + sum_{j : s_ij < R_ij} (V'(s_ij) / s_ij) (r_j - r_i)
+        [- grad V_i(r_i) - c_d v_i where the damping region holds]     (paper 002 only)
+with N_i from a fixed graph (CSR, potential never saturated: eq. 4-5), or from the grid:
+j in N_i iff s_ij < R_ij (or <=), the potential saturated at s >= R_ij (eq. 10). R_ij is
+  uniform  R                                     (paper 000, section 5)
+  own      R_i, agent i's adaptive radius        (paper 002, eq. 4 as printed)
+  min      min(R_i, R_j)                         (a symmetric variant)
+Semi-implicit Euler (the default step): v' = v + dt u(r, v), r' = r + dt v'.
+`accel` kernels write u alone, for the RK4 stages (kernels/integrators.py).
+A non-finite result increments bad[0]; the caller raises SimulationDiverged.
+"""
+
+from functools import cache
+
+import taichi as ti
+
+from . import potentials
+from .flocking_navigation import make_navigation
+from .graph import union
+from .grid import make_visitor, within
+
+nd = ti.types.ndarray()
+# Slots of the force parameter array.
+P_DT, P_A, P_C, P_R2, P_CD, P_VMIN, P_STUCK2, P_FLOOR = range(8)
+P_SIZE = 8
+UNIFORM, OWN, MIN = 0, 1, 2
+RADIUS_RULES = {"uniform": UNIFORM, "own": OWN, "min": MIN}
+NO_DAMPING, ABOVE_VMIN, BELOW_VMIN, EVERYWHERE = 0, 1, 2, 3
+DAMPING = {"none": NO_DAMPING, "above_vmin": ABOVE_VMIN, "below_vmin": BELOW_VMIN,
+           "everywhere": EVERYWHERE}
+NEAREST_NONE = 1e300
+
+
+@ti.func
+def pair_radius2(rule: ti.template(), i, k, rad: ti.template(), prm: ti.template()):
+    """R_ij^2 for the rule (uniform R from prm, else the per-agent radii)."""
+    r2 = prm[P_R2]
+    if ti.static(rule == OWN):
+        r2 = rad[i] * rad[i]
+    elif ti.static(rule == MIN):
+        r = ti.min(rad[i], rad[k])
+        r2 = r * r
+    return r2
+
+
+@ti.func
+def nonfinite(x, v):
+    s = x[0] + x[1] + v[0] + v[1]  # NaN if any term is NaN or infinite
+    return ti.math.isnan(s) or ti.math.isinf(s)
+
+
+@cache
+def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
+                 has_obstacles: bool, unit_kappa: bool):
+    """(euler, accel) kernels over the neighbour grid, specialised at compile time."""
+    navigation = make_navigation(has_obstacles, unit_kappa)
+
+    @ti.func
+    def pair(i, k, d, acc, S: ti.template()):
+        vel, rad, prm = ti.static(S[0], S[1], S[2])
+        if k != i:
+            s2 = d.dot(d)
+            r2 = pair_radius2(rule, i, k, rad, prm)
+            if within(s2, r2, inclusive):  # alignment: j in N_i
+                acc += ti.math.vec2(vel[k, 0] - vel[i, 0], vel[k, 1] - vel[i, 1])
+            if s2 < r2:  # U_ij = V(s) below R, constant (no force) from R on
+                acc += potentials.force_factor(s2, prm[P_A]) * d
+        return acc
+
+    visit = make_visitor(pair)
+
+    @ti.func
+    def control(i, xi, vi, pos: ti.template(), vel: ti.template(), rad: ti.template(),
+                prm: ti.template(), nav: ti.template(), G: ti.template(), O: ti.template()):
+        acc = visit(i, xi, ti.math.vec2(0.0), pos, G, ti.static((vel, rad, prm)), False)
+        if ti.static(mission):
+            nv = navigation(xi, nav, O)
+            acc -= ti.math.vec2(nv[1], nv[2])
+            if ti.static(damping == EVERYWHERE):
+                acc -= prm[P_CD] * vi
+            elif ti.static(damping == ABOVE_VMIN):
+                if nv[0] > prm[P_VMIN]:
+                    acc -= prm[P_CD] * vi
+            elif ti.static(damping == BELOW_VMIN):
+                if nv[0] <= prm[P_VMIN]:
+                    acc -= prm[P_CD] * vi
+        return acc
+
+    @ti.kernel
+    def euler(pos: nd, vel: nd, rad: nd, pos_out: nd, vel_out: nd, prm: nd, nav: nd, bad: nd,
+              start: nd, cid: nd, gf: nd, gi: nd,
+              opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
+        for i in range(pos.shape[0]):
+            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+            vi = ti.math.vec2(vel[i, 0], vel[i, 1])
+            u = control(i, xi, vi, pos, vel, rad, prm, nav, ti.static((start, cid, gf, gi)),
+                        ti.static((opos, orad, ostart, ocid, ogf, ogi)))
+            v = vi + prm[P_DT] * u
+            x = xi + prm[P_DT] * v
+            pos_out[i, 0], pos_out[i, 1] = x[0], x[1]
+            vel_out[i, 0], vel_out[i, 1] = v[0], v[1]
+            if nonfinite(x, v):
+                ti.atomic_add(bad[0], 1)
+
+    @ti.kernel
+    def accel(pos: nd, vel: nd, rad: nd, acc_out: nd, prm: nd, nav: nd, bad: nd,
+              start: nd, cid: nd, gf: nd, gi: nd,
+              opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
+        for i in range(pos.shape[0]):
+            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+            vi = ti.math.vec2(vel[i, 0], vel[i, 1])
+            u = control(i, xi, vi, pos, vel, rad, prm, nav, ti.static((start, cid, gf, gi)),
+                        ti.static((opos, orad, ostart, ocid, ogf, ogi)))
+            acc_out[i, 0], acc_out[i, 1] = u[0], u[1]
+            if nonfinite(u, xi):
+                ti.atomic_add(bad[0], 1)
+
+    return euler, accel
+
+
+@ti.func
+def _csr_control(i, xi, vi, pos: ti.template(), vel: ti.template(), indptr: ti.template(),
+                 indices: ti.template(), prm: ti.template()):
+    acc = ti.math.vec2(0.0)
+    for e in range(indptr[i], indptr[i + 1]):
+        j = indices[e]
+        d = ti.math.vec2(pos[j, 0] - xi[0], pos[j, 1] - xi[1])
+        acc += ti.math.vec2(vel[j, 0] - vi[0], vel[j, 1] - vi[1])
+        acc += potentials.force_factor(d.dot(d), prm[P_A]) * d
+    return acc
+
+
+@ti.kernel
+def csr_euler(pos: nd, vel: nd, pos_out: nd, vel_out: nd, indptr: nd, indices: nd, prm: nd,
+              bad: nd):
+    """One semi-implicit Euler step on a fixed graph (paper 000 eq. 1, 3)."""
+    for i in range(pos.shape[0]):
+        xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+        vi = ti.math.vec2(vel[i, 0], vel[i, 1])
+        v = vi + prm[P_DT] * _csr_control(i, xi, vi, pos, vel, indptr, indices, prm)
+        x = xi + prm[P_DT] * v
+        pos_out[i, 0], pos_out[i, 1] = x[0], x[1]
+        vel_out[i, 0], vel_out[i, 1] = v[0], v[1]
+        if nonfinite(x, v):
+            ti.atomic_add(bad[0], 1)
+
+
+@ti.kernel
+def csr_accel(pos: nd, vel: nd, acc_out: nd, indptr: nd, indices: nd, prm: nd, bad: nd):
+    """u_i of eq. 3 on a fixed graph."""
+    for i in range(pos.shape[0]):
+        xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+        vi = ti.math.vec2(vel[i, 0], vel[i, 1])
+        u = _csr_control(i, xi, vi, pos, vel, indptr, indices, prm)
+        acc_out[i, 0], acc_out[i, 1] = u[0], u[1]
+        if nonfinite(u, xi):
+            ti.atomic_add(bad[0], 1)
+
+
+@ti.kernel
+def csr_potential(pos: nd, indptr: nd, indices: nd, prm: nd, pot: nd):
+    """pot[i] = V_i = sum_{j in N_i} V(|r_ij|) (eq. 4)."""
+    for i in range(pos.shape[0]):
+        acc = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            j = indices[e]
+            d = ti.math.vec2(pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1])
+            acc += potentials.value(d.dot(d), prm[P_A], prm[P_C])
+        pot[i] = acc
+
+
+@cache
+def grid_observe_kernel(rule: int, inclusive: bool):
+    """Kernel writing, per agent (grid order): valency |N_i|, the nearest agent among the
+    3x3 cells (squared distance and slot), sum_{j != i} (U_ij - V(R_ij)) (the saturated
+    potential less its constant), and the union of every edge into `parent`."""
+
+    @ti.func
+    def pair(i, k, d, acc, S: ti.template()):
+        rad, prm, parent = ti.static(S[0], S[1], S[2])
+        if k != i:
+            s2 = d.dot(d)
+            if s2 < acc[1]:
+                acc[1] = s2
+                acc[2] = ti.cast(k, ti.f64)
+            r2 = pair_radius2(rule, i, k, rad, prm)
+            if within(s2, r2, inclusive):
+                acc[0] += 1.0
+                if ti.static(rule == OWN):  # j in N_i need not imply i in N_j
+                    union(parent, i, k)
+                elif k > i:
+                    union(parent, i, k)
+            if s2 < r2:
+                acc[3] += potentials.value(s2, prm[P_A], prm[P_C]) \
+                    - potentials.value(r2, prm[P_A], prm[P_C])
+        return acc
+
+    visit = make_visitor(pair)
+
+    @ti.kernel
+    def observe(pos: nd, rad: nd, prm: nd, parent: nd, deg: nd, near_d2: nd, near_k: nd,
+                pot: nd, start: nd, cid: nd, gf: nd, gi: nd):
+        for i in range(pos.shape[0]):
+            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+            acc = visit(i, xi, ti.math.vec4(0.0, NEAREST_NONE, -1.0, 0.0), pos,
+                        ti.static((start, cid, gf, gi)), ti.static((rad, prm, parent)), False)
+            deg[i] = ti.cast(acc[0], ti.i32)
+            near_d2[i] = acc[1]
+            near_k[i] = ti.cast(acc[2], ti.i32)
+            pot[i] = acc[3]
+
+    return observe
+
+
+@cache
+def radius_kernel(rule: int, inclusive: bool):
+    """Adaptive radius, paper 002 eq. 4, synchronously (reads rad, writes rad_out):
+    R_i' = max(R_i / 2, floor) if |v_i| < stuck_speed and V_i > V_min,
+    R_i' = max(R_i, R_j for j in N_i) otherwise. counts += (halved, increased)."""
+
+    @ti.func
+    def pair(i, k, d, acc, S: ti.template()):
+        rad, prm = ti.static(S[0], S[1])
+        if k != i and within(d.dot(d), pair_radius2(rule, i, k, rad, prm), inclusive):
+            acc = ti.max(acc, rad[k])
+        return acc
+
+    visit = make_visitor(pair)
+
+    @ti.kernel
+    def update(pos: nd, vel: nd, rad: nd, rad_out: nd, mission: nd, prm: nd, counts: nd,
+               start: nd, cid: nd, gf: nd, gi: nd):
+        for i in range(pos.shape[0]):
+            r = rad[i]
+            speed2 = vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1]
+            new = r
+            if speed2 < prm[P_STUCK2] and mission[i, 0] > prm[P_VMIN]:
+                new = ti.max(0.5 * r, prm[P_FLOOR])
+                if new < r:
+                    ti.atomic_add(counts[0], 1)
+            else:
+                new = visit(i, ti.math.vec2(pos[i, 0], pos[i, 1]), r, pos,
+                            ti.static((start, cid, gf, gi)), ti.static((rad, prm)), False)
+                if new > r:
+                    ti.atomic_add(counts[1], 1)
+            rad_out[i] = new
+
+    return update

@@ -1,0 +1,425 @@
+"""M4 kernel: Xi–Abed formation control with virtual leaders (paper 003).
+
+Right-hand side, for every agent at once from the state at time t (eq. 1-2, 6, 12):
+  rdot_i = f(|l_i - r_i|) (l_i - r_i)/|l_i - r_i|                 attraction (eq. 3 / eq. 5)
+         + sum_{j : |r_ij| < d} g(|r_ji|) r_ji/|r_ji|,  r_ji = r_j - r_i    repulsion (eq. 4)
+  l_i = r_id(t) = p(t) + b_i(t) (F1, eq. 3)  or  r_0(t) = p(t) (F2, eq. 5)
+Integrators: explicit Euler r(t + dt) = r(t) + dt rdot(t); classical RK4 with stages at t,
+t + dt/2, t + dt (each stage re-buckets its positions, so neighbours are always exact).
+Neighbours come from the uniform grid (cell = d); g(d) = 0, so < and <= give the same forces.
+Two agents at the same position (g singular) stop the run.
+
+Observables (at observation steps only): formation error against r_id + a with the lag a of
+eq. 8, the centroid's distance to p(t), speeds against the leader's, the minimum pairwise
+distance, V1 (eq. 10) or V2 (eq. 16), and for F2 the properties D1-D3.
+"""
+
+from functools import cache
+from typing import Any
+
+import numpy as np
+import taichi as ti
+
+from schemas import Scenario
+from schemas.formation import FormationParams, SaturatingF
+
+from .formation_forces import (
+    F_KINDS,
+    G_KINDS,
+    P_D2,
+    P_DT,
+    attract,
+    attraction_energy,
+    force_params,
+    g_over_s,
+    lag_length,
+    pair_energy,
+)
+from .formation_path import make_path
+from .formation_props import at_leader, d2_isolated, d3_holds, roots
+from .formation_schedule import OffsetSchedule
+from .graph import MetricGraph
+from .grid import Grid, make_visitor, permute, permute_rows, within
+from .initial import initial_state
+from .layout import SortedState
+from .model import ModelKernel, register_kernel
+from .result import SimulationDiverged
+
+nd = ti.types.ndarray()
+# prm: the gains (formation_forces.P_*), then per time slot s (0: t, 1: t + dt/2, 2: t + dt)
+# the leader p(t) and the 2x2 weights of the two stored formations A and B (F1 only).
+_SLOT0, _SLOT_LEN = 8, 10
+_NO_PAIR = 1e300  # nearest-candidate sentinel
+
+
+@ti.func
+def leader(i, ids: ti.template(), ba: ti.template(), bb: ti.template(), prm: ti.template(),
+           slot, f1: ti.template(), blend: ti.template()):
+    """l_i = p(t) (F2) or p(t) + M_A A[id] + M_B B[id] (F1)."""
+    o = _SLOT0 + _SLOT_LEN * slot
+    r = ti.math.vec2(prm[o], prm[o + 1])
+    if ti.static(f1):
+        a = ids[i]
+        r += ti.math.vec2(prm[o + 2] * ba[a, 0] + prm[o + 3] * ba[a, 1],
+                          prm[o + 4] * ba[a, 0] + prm[o + 5] * ba[a, 1])
+        if ti.static(blend):
+            r += ti.math.vec2(prm[o + 6] * bb[a, 0] + prm[o + 7] * bb[a, 1],
+                              prm[o + 8] * bb[a, 0] + prm[o + 9] * bb[a, 1])
+    return r
+
+
+@cache
+def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: bool):
+    """Compile-time specialised kernels: one Euler step, rates at a time slot, observation."""
+
+    @ti.func
+    def pair_rate(i, k, dv, acc, S: ti.template()):
+        prm = ti.static(S[0])
+        d2 = dv.dot(dv)
+        if k != i and within(d2, prm[P_D2], inclusive):
+            if d2 > 0.0:
+                w = g_over_s(ti.sqrt(d2), prm, gkind)
+                acc += ti.math.vec3(w * dv[0], w * dv[1], 0.0)
+            else:
+                acc[2] += 1.0  # coincident agents
+        return acc
+
+    @ti.func
+    def pair_obs(i, k, dv, acc, S: ti.template()):
+        # acc: repulsion x, y, coincident, degree, sum of G, nearest squared distance
+        prm = ti.static(S[0])
+        d2 = dv.dot(dv)
+        if k != i:
+            acc[5] = ti.min(acc[5], d2)
+            if within(d2, prm[P_D2], inclusive):
+                acc[3] += 1.0
+                if d2 > 0.0:
+                    s = ti.sqrt(d2)
+                    w = g_over_s(s, prm, gkind)
+                    acc[0] += w * dv[0]
+                    acc[1] += w * dv[1]
+                    acc[4] += pair_energy(s, prm, gkind)
+                else:
+                    acc[2] += 1.0
+        return acc
+
+    visit_rate = make_visitor(pair_rate)
+    visit_obs = make_visitor(pair_obs)
+
+    @ti.func
+    def rate(i, pos: ti.template(), ids: ti.template(), ba: ti.template(), bb: ti.template(),
+             prm: ti.template(), slot, G: ti.template()):
+        """(rdot_x, rdot_y, coincident neighbours) of agent slot i."""
+        xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+        acc = visit_rate(i, xi, ti.math.vec3(0.0), pos, G, ti.static((prm,)), False)
+        v = attract(leader(i, ids, ba, bb, prm, slot, f1, blend) - xi, prm, fkind)
+        return ti.math.vec3(v[0] + acc[0], v[1] + acc[1], acc[2])
+
+    @ti.func
+    def flag(bad: ti.template(), x, y, coincident):
+        if coincident > 0.0:
+            ti.atomic_add(bad[1], 1)
+        s = x + y  # NaN if either is NaN or infinite
+        if ti.math.isnan(s) or ti.math.isinf(s):
+            ti.atomic_add(bad[0], 1)
+
+    @ti.kernel
+    def euler(pos: nd, ids: nd, ba: nd, bb: nd, pos_out: nd, prm: nd, bad: nd,
+              start: nd, cid: nd, gf: nd, gi: nd):
+        for i in range(pos.shape[0]):
+            r = rate(i, pos, ids, ba, bb, prm, 0, ti.static((start, cid, gf, gi)))
+            x = pos[i, 0] + prm[P_DT] * r[0]
+            y = pos[i, 1] + prm[P_DT] * r[1]
+            pos_out[i, 0] = x
+            pos_out[i, 1] = y
+            flag(bad, x, y, r[2])
+
+    @ti.kernel
+    def rates(pos: nd, ids: nd, ba: nd, bb: nd, vel: nd, prm: nd, slot: ti.i32, bad: nd,
+              start: nd, cid: nd, gf: nd, gi: nd):
+        for i in range(pos.shape[0]):
+            r = rate(i, pos, ids, ba, bb, prm, slot, ti.static((start, cid, gf, gi)))
+            vel[i, 0] = r[0]
+            vel[i, 1] = r[1]
+            flag(bad, r[0], r[1], r[2])
+
+    @ti.kernel
+    def observe(pos: nd, ids: nd, ba: nd, bb: nd, vel: nd, aux: nd, prm: nd,
+                start: nd, cid: nd, gf: nd, gi: nd):
+        for i in range(pos.shape[0]):
+            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+            init = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0, _NO_PAIR])
+            acc = visit_obs(i, xi, init, pos, ti.static((start, cid, gf, gi)),
+                            ti.static((prm,)), False)
+            v = attract(leader(i, ids, ba, bb, prm, 0, f1, blend) - xi, prm, fkind)
+            vel[i, 0] = v[0] + acc[0]
+            vel[i, 1] = v[1] + acc[1]
+            aux[i, 0] = acc[3]
+            aux[i, 1] = acc[4]
+            aux[i, 2] = acc[5]
+            aux[i, 3] = acc[2]
+
+    return euler, rates, observe
+
+
+@ti.kernel
+def _axpy(x: nd, k: nd, a: ti.f64, out: nd):
+    for i in range(x.shape[0]):
+        for c in ti.static(range(2)):
+            out[i, c] = x[i, c] + a * k[i, c]
+
+
+@ti.kernel
+def _gather_rows(src: nd, dst: nd, perm: nd):
+    """dst[i, :] = src[perm[i], :]: undo a permutation."""
+    for i in range(dst.shape[0]):
+        for c in ti.static(range(2)):
+            dst[i, c] = src[perm[i], c]
+
+
+@ti.kernel
+def _rk4_combine(x: nd, k1: nd, k2: nd, k3: nd, k4: nd, dt: ti.f64, out: nd, bad: nd):
+    for i in range(x.shape[0]):
+        for c in ti.static(range(2)):
+            out[i, c] = x[i, c] + dt / 6.0 * (k1[i, c] + 2.0 * k2[i, c] + 2.0 * k3[i, c]
+                                              + k4[i, c])
+        s = out[i, 0] + out[i, 1]
+        if ti.math.isnan(s) or ti.math.isinf(s):
+            ti.atomic_add(bad[0], 1)
+
+
+@register_kernel
+class FormationKernel(ModelKernel):
+    kind = "formation"
+
+    def __init__(self, scenario: Scenario):
+        super().__init__(scenario)
+        p: FormationParams = scenario.model  # type: ignore[assignment]
+        self.p = p
+        self.n = n = scenario.n_agents
+        self.d = d = scenario.neighbours.radius
+        self.dt = dt = scenario.time.dt
+        self.f1 = p.design == "F1"
+        init = initial_state(scenario)
+        self.path = make_path(p.path, init.positions.mean(axis=0))
+        if isinstance(p.attraction, SaturatingF):
+            top = float(np.hypot(*self.path.velocity(0.0)))
+            if top >= p.attraction.v_max:
+                raise ValueError(
+                    f"leader speed {top:g} >= attraction.v_max = {p.attraction.v_max:g}: "
+                    "the agents could never keep up (eq. 8 has no solution)"
+                )
+        self.schedule = OffsetSchedule(p.formation, p.schedule, n, d) if self.f1 else None
+        self.state = SortedState({"pos": init.positions})
+        self.grid = Grid(n, d, None)
+        self.graph: MetricGraph | None = None
+        self.prm_host = np.zeros(_SLOT0 + 3 * _SLOT_LEN)
+        self.prm_host[: _SLOT0 - 2] = force_params(p, d, dt)
+        self.prm = ti.ndarray(ti.f64, shape=self.prm_host.shape)
+        rows = n if self.f1 else 1
+        self.b_dev = [ti.ndarray(ti.f64, shape=(rows, 2)) for _ in range(2)]
+        self.b_held: list[int | None] = [None, None]
+        self.bad = ti.ndarray(ti.i32, shape=2)
+        self.fkind = F_KINDS[p.attraction.kind]
+        self.gkind = G_KINDS[p.repulsion.kind]
+        self.inclusive = scenario.inclusive
+        if p.integrator == "rk4":
+            self.grid2 = Grid(n, d, None)
+            self.tmp_pos = ti.ndarray(ti.f64, shape=(n, 2))
+            self.tmp_vel = ti.ndarray(ti.f64, shape=(n, 2))
+            self.tmp_ids = ti.ndarray(ti.i32, shape=n)
+            self.y = ti.ndarray(ti.f64, shape=(n, 2))
+            self.k = [ti.ndarray(ti.f64, shape=(n, 2)) for _ in range(4)]
+        self.obs_out: tuple | None = None
+        self._sorted_for = -1
+        self.now = 0  # the step index of the current state
+
+    # --- time-dependent leader data -----------------------------------------------------
+
+    def _load_times(self, times: list[float]) -> bool:
+        """Write p(t) and the offset weights of each slot; True when formation B is used."""
+        weights = [self.schedule.weights(t) if self.f1 else {} for t in times]
+        used = sorted({k for w in weights for k in w})
+        if len(used) > 2:
+            raise ValueError("formation changes closer together than one time step dt")
+        for k in used:
+            if k not in self.b_held:
+                free = next(j for j in range(2) if self.b_held[j] not in used)
+                self.b_dev[free].from_numpy(self.schedule.stored[k])
+                self.b_held[free] = k
+        for s, (t, w) in enumerate(zip(times, weights, strict=True)):
+            o = _SLOT0 + _SLOT_LEN * s
+            self.prm_host[o: o + 2] = self.path.position(t)
+            mats = [w.get(self.b_held[j], np.zeros((2, 2))) for j in range(2)]
+            self.prm_host[o + 2: o + 6] = mats[0].ravel()
+            self.prm_host[o + 6: o + 10] = mats[1].ravel()
+        self.prm.from_numpy(self.prm_host)
+        return any(self.b_held[1] in w for w in weights)
+
+    def _kernels(self, blend: bool):
+        return formation_kernels(self.fkind, self.gkind, self.f1, blend, self.inclusive)
+
+    # --- stepping -------------------------------------------------------------------------
+
+    def _sort(self, step: int) -> None:
+        if self._sorted_for != step:
+            self.grid.build(self.state["pos"], step)
+            self.state.resort(self.grid)
+            self._sorted_for = step
+
+    def _check(self, step: int) -> None:
+        bad = self.bad.to_numpy()
+        if bad[1]:
+            raise SimulationDiverged(
+                step, "position", "two agents at the same position, where g is singular "
+                "(dt too large lets agents jump onto each other)"
+            )
+        if bad[0]:
+            raise SimulationDiverged(
+                step, "position", "non-finite position (dt too large for the repulsion's "
+                "stiffness at close range)"
+            )
+
+    def step(self, step: int) -> None:
+        self._sort(step)
+        st = self.state
+        t = step * self.dt
+        self.bad.fill(0)
+        if self.p.integrator == "euler":
+            blend = self._load_times([t])
+            euler, _, _ = self._kernels(blend)
+            euler(st["pos"], st.ids, *self.b_dev, st.scratch("pos"), self.prm, self.bad,
+                  *self.grid.view())
+            self._check(step)
+            st.swap("pos")
+            self.now = step + 1
+            return
+        blend = self._load_times([t, t + 0.5 * self.dt, t + self.dt])
+        _, rates, _ = self._kernels(blend)
+        x, (k1, k2, k3, k4) = st["pos"], self.k
+        rates(x, st.ids, *self.b_dev, k1, self.prm, 0, self.bad, *self.grid.view())
+        for slot, a, k_in, k_out in ((1, 0.5, k1, k2), (1, 0.5, k2, k3), (2, 1.0, k3, k4)):
+            _axpy(x, k_in, a * self.dt, self.y)
+            self._rates_at(self.y, slot, k_out, rates, step)
+        _rk4_combine(x, k1, k2, k3, k4, self.dt, st.scratch("pos"), self.bad)
+        self._check(step)
+        st.swap("pos")
+        self.now = step + 1
+
+    def _rates_at(self, y, slot: int, out, rates, step: int) -> None:
+        """rdot at positions y (storage order): bucket y on a second grid, evaluate there,
+        bring the rates back to storage order."""
+        g2 = self.grid2
+        g2.build(y, step)
+        permute_rows(y, self.tmp_pos, g2.perm)
+        permute(self.state.ids, self.tmp_ids, g2.perm)
+        rates(self.tmp_pos, self.tmp_ids, *self.b_dev, self.tmp_vel, self.prm, slot, self.bad,
+              *g2.view())
+        _gather_rows(self.tmp_vel, out, g2.perm)
+
+    # --- observation ----------------------------------------------------------------------
+
+    def _observe_arrays(self, step: int) -> dict[str, np.ndarray]:
+        """Positions, rates and neighbour data in storage order at time step * dt."""
+        self._sort(step)
+        st = self.state
+        blend = self._load_times([step * self.dt])
+        _, _, observe = self._kernels(blend)
+        if self.obs_out is None:
+            self.obs_out = (ti.ndarray(ti.f64, shape=(self.n, 2)),
+                            ti.ndarray(ti.f64, shape=(self.n, 4)))
+        vel, aux = self.obs_out
+        observe(st["pos"], st.ids, *self.b_dev, vel, aux, self.prm, *self.grid.view())
+        return {"pos": st["pos"].to_numpy(), "vel": vel.to_numpy(), "aux": aux.to_numpy(),
+                "ids": st.ids_numpy()}
+
+    def observe(self, step: int) -> dict[str, float]:
+        t = step * self.dt
+        arr = self._observe_arrays(step)
+        pos, vel, aux, ids = arr["pos"], arr["vel"], arr["aux"], arr["ids"]
+        p, q = self.path.position(t), self.path.velocity(t)
+        qn = float(np.hypot(*q))
+        speed = np.hypot(vel[:, 0], vel[:, 1])
+        c = pos.mean(axis=0)
+        obs = {
+            "leader_x": float(p[0]), "leader_y": float(p[1]), "leader_speed": qn,
+            "centroid_x": float(c[0]), "centroid_y": float(c[1]),
+            "centroid_distance": float(np.hypot(*(c - p))),
+            "speed_min": float(speed.min()), "speed_mean": float(speed.mean()),
+            "speed_max": float(speed.max()),
+            "speed_error_max": float(np.abs(speed - qn).max()),
+            "velocity_mismatch_max": float(np.hypot(*(vel - q).T).max()),
+            "min_distance": self._min_distance(pos, aux[:, 2]),
+            "degree_mean": float(aux[:, 0].mean()),
+        }
+        pair_part = 0.5 * float(aux[:, 1].sum())
+        if self.f1:
+            lag = lag_length(self.p, qn)
+            a = np.zeros(2) if qn == 0.0 else (lag / qn) * q
+            if self.p.lag_sign == "eq8":
+                a = -a
+            err = pos - (p + self.schedule.at(t)[ids] + a)
+            e = np.hypot(err[:, 0], err[:, 1])
+            obs.update({
+                "formation_error": float(e.mean()), "formation_error_max": float(e.max()),
+                "lag": float(lag),
+                "V1": float(attraction_energy(self.p, e).sum()) + pair_part,
+            })
+        else:
+            rel = pos - p
+            obs["V2"] = float(attraction_energy(self.p, np.hypot(rel[:, 0], rel[:, 1])).sum()
+                              ) + pair_part
+            obs.update(self._d_properties(rel, aux[:, 0], obs["min_distance"]))
+        return obs
+
+    def _min_distance(self, pos: np.ndarray, nearest2: np.ndarray) -> float:
+        """Exact when some pair is closer than a grid cell; else exact by brute force at
+        N <= 4096, and the cell width (a lower bound) beyond."""
+        m = float(nearest2.min())
+        if m < _NO_PAIR:
+            return float(np.sqrt(m))
+        if 2 <= self.n <= 4096:
+            diff = pos[:, None, :] - pos[None, :, :]
+            dist = np.hypot(diff[..., 0], diff[..., 1])
+            np.fill_diagonal(dist, np.inf)
+            return float(dist.min())
+        return float(self.grid.gf[0])
+
+    def _d_properties(self, rel: np.ndarray, degree: np.ndarray, min_dist: float
+                      ) -> dict[str, float]:
+        """D1-D3 of an F2 formation around r_0 = p(t)."""
+        tol = self.p.leader_tolerance or self.d / 100.0
+        collide = self.p.collision_distance or self.d / 100.0
+        if self.graph is None:
+            self.graph = MetricGraph(self.n, self.d, self.inclusive, False)
+        st = self.state
+        self.graph.union_edges(self.grid, st["pos"], st.ids)
+        labels = roots(self.graph.parent.to_numpy())
+        isolated = d2_isolated(degree, at_leader(rel, tol))
+        d3 = d3_holds(rel, labels, tol)
+        return {
+            "D1": float(min_dist >= collide),
+            "D2": float(isolated == 0),
+            "D3": float(d3),
+            "isolated": float(isolated),
+            "components": float(len(np.unique(labels))),
+        }
+
+    def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
+        self._sort(self.now)
+        ids = self.state.ids_numpy()
+        out = {}
+        if "position" in arrays:
+            out["position"] = self.state.in_id_order("pos", ids)
+        if "velocity" in arrays:
+            vel = self._observe_arrays(self.now)["vel"]
+            out["velocity"] = np.empty_like(vel)
+            out["velocity"][ids] = vel
+        return out
+
+    def convergence_keys(self) -> list[str]:
+        return ["formation_error", "velocity_mismatch_max"] if self.f1 else [
+            "velocity_mismatch_max"]
+
+    def extra(self) -> dict[str, Any]:
+        return {"leader_arrival_time": self.path.arrival_time}

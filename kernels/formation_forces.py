@@ -1,0 +1,91 @@
+"""f (attraction) and g (repulsion) of the Xi–Abed designs behind one interface.
+
+Taichi side, selected at compile time by kind (F_*, G_* below), runtime gains in `prm`:
+  attract(z)   = f(|z|) z/|z|                      (eq. 3 / eq. 5 with z = r_leader - r_i)
+                 linear     f(s) = k s             -> k z
+                 quadratic  f(s) = c (s^2 + s)     -> c (|z| + 1) z
+                 saturating f(s) = v tanh(k s / v) -> f(|z|)/|z| z (0 at z = 0)
+  g_over_s(s)  = g(s)/s for 0 < s < d              (eq. 4: v_R += g(s)/s (r_j - r_i))
+                 inverse        g(s) = -k_g (1/s - 1/d)
+                 inverse_square g(s) = -k_g (1/s^2 - 1/d^2)
+  pair_energy(s) = G(s) = int_d^s g                (the pair term of V1, eq. 10, and V2, eq. 16)
+numpy side: F(s) = int_0^s f (the leader term of V1/V2) and the steady lag |a| = f^-1(|q|)
+solving eq. 8.
+"""
+
+import numpy as np
+import taichi as ti
+
+from schemas.formation import FormationParams, LinearF, QuadraticF, SaturatingF
+
+F_KINDS = {"linear": 0, "quadratic": 1, "saturating": 2}
+G_KINDS = {"inverse": 0, "inverse_square": 1}
+# prm slots shared by every formation kernel
+P_FA, P_FB, P_KG, P_D, P_D2, P_DT = range(6)
+
+
+def force_params(p: FormationParams, d: float, dt: float) -> np.ndarray:
+    """The gains in the slot order above."""
+    f = p.attraction
+    fa = f.c if isinstance(f, QuadraticF) else f.k
+    fb = f.v_max if isinstance(f, SaturatingF) else 0.0
+    return np.array([fa, fb, p.repulsion.k_g, d, d * d, dt], dtype=np.float64)
+
+
+@ti.func
+def attract(z, prm: ti.template(), fkind: ti.template()):
+    """f(|z|) z / |z|."""
+    v = ti.math.vec2(0.0)
+    if ti.static(fkind == F_KINDS["linear"]):
+        v = prm[P_FA] * z
+    elif ti.static(fkind == F_KINDS["quadratic"]):
+        v = prm[P_FA] * (ti.sqrt(z.dot(z)) + 1.0) * z
+    else:
+        s = ti.sqrt(z.dot(z))
+        if s > 0.0:
+            v = (prm[P_FB] * ti.tanh(prm[P_FA] * s / prm[P_FB]) / s) * z
+    return v
+
+
+@ti.func
+def g_over_s(s, prm: ti.template(), gkind: ti.template()):
+    """g(s) / s for 0 < s < d."""
+    r = 0.0
+    if ti.static(gkind == G_KINDS["inverse"]):
+        r = -prm[P_KG] * (1.0 / s - 1.0 / prm[P_D]) / s
+    else:
+        r = -prm[P_KG] * (1.0 / (s * s) - 1.0 / prm[P_D2]) / s
+    return r
+
+
+@ti.func
+def pair_energy(s, prm: ti.template(), gkind: ti.template()):
+    """G(s) = int_d^s g(sigma) dsigma >= 0 for 0 < s < d."""
+    d = prm[P_D]
+    e = 0.0
+    if ti.static(gkind == G_KINDS["inverse"]):
+        e = prm[P_KG] * (ti.log(d / s) + s / d - 1.0)
+    else:
+        e = prm[P_KG] * (1.0 / s + s / prm[P_D2] - 2.0 / d)
+    return e
+
+
+def attraction_energy(p: FormationParams, s: np.ndarray) -> np.ndarray:
+    """F(s) = int_0^s f(sigma) dsigma (V1's k s^2 / 2 for linear f)."""
+    f = p.attraction
+    if isinstance(f, LinearF):
+        return 0.5 * f.k * s * s
+    if isinstance(f, QuadraticF):
+        return f.c * (s**3 / 3.0 + s * s / 2.0)
+    x = f.k * s / f.v_max  # v^2/k ln cosh x, written to stay finite for large x
+    return (f.v_max**2 / f.k) * (x + np.log1p(np.exp(-2.0 * x)) - np.log(2.0))
+
+
+def lag_length(p: FormationParams, speed: float) -> float:
+    """|a| with f(|a|) = |q| (eq. 8)."""
+    f = p.attraction
+    if isinstance(f, LinearF):
+        return speed / f.k
+    if isinstance(f, QuadraticF):
+        return (np.sqrt(1.0 + 4.0 * speed / f.c) - 1.0) / 2.0
+    return float(f.v_max / f.k * np.arctanh(speed / f.v_max))

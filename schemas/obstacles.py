@@ -1,0 +1,132 @@
+"""M3: flocking with obstacle avoidance and a destination (paper 002, Tanner).
+
+Double integrator (eq. 1) with the control law (eq. 3)
+  u_i = - sum_{j in N_i} [(v_i - v_j) + grad_{r_i} U_ij] - grad_{r_i} V_i - c_d v_i [V_i > V_min],
+N_i = {j : |r_ij| <= R_i}; U_ij = 1/s^2 + log s^2 for s < R_i, V_R beyond (p. 3).
+Mission potential (a navigation function), destination r_d, obstacles o:
+  beta_io = (1 - lambda [delta - d]^2 / ([delta - d]^2 + 1))^m,
+  m = 1/2 (sign(d^2 - delta^2) + 1), lambda = (d^2 + 1) / d^2,
+  V_i = |r_i - r_d|^2 / (|r_i - r_d|^(2 kappa) + prod_o beta_io)^(1 / kappa),
+delta the distance from r_i to the obstacle's boundary (a point: |r_i - r_o|; a disc:
+|r_i - r_o| - rho). Adaptive radius (eq. 4): R_i <- R_i / 2 when agent i is immobilised
+(|v_i| < stuck_speed) while V_i > V_min, else R_i <- max(R_i, R_j for j in N_i).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, ClassVar, Literal
+
+from pydantic import Field, StrictBool
+
+from .base import NonNegativeReal, PositiveInt, PositiveReal, Real, Strict, Vec2
+from .catalog import register_model
+from .flocking import DoubleIntegratorParams, PotentialSpec, check_radius_exceeds_d
+
+if TYPE_CHECKING:
+    from .scenario import Scenario
+
+MAX_OBSTACLES = 1_000_000
+
+
+class DiscObstacle(Strict):
+    """A disc obstacle: delta = |r_i - center| - radius is the distance to its boundary."""
+
+    center: Vec2 = Field(description="Centre r_o (length).")
+    radius: PositiveReal = Field(description="Radius rho (length).")
+
+
+@register_model
+class ObstacleFlockingParams(DoubleIntegratorParams):
+    """Tanner's flocking among obstacles towards a destination, with adaptive radii."""
+
+    paper: ClassVar[str] = (
+        "002 Tanner, Flocking with obstacle avoidance in switching networks of "
+        "interconnected vehicles"
+    )
+    equations: ClassVar[str] = (
+        "eq. 1 (double integrator), eq. 3 (u_i with damping), p. 3 (U_ij, beta_io, lambda, "
+        "m, V_i navigation function), eq. 4 (adaptive radius), eq. 5 (Q)"
+    )
+    summary: ClassVar[str] = (
+        "Flocking double integrators steered by a navigation function to a destination "
+        "around point and disc obstacles, halving their radius when stuck."
+    )
+    paper_inclusive: ClassVar[bool] = True
+
+    kind: Literal["flocking_obstacles"] = "flocking_obstacles"
+    potential: PotentialSpec = Field(
+        default=PotentialSpec(kind="paper002"),
+        description="Interaction potential U_ij below R_i (default paper 002's 1/s^2 + log s^2).",
+    )
+    destination: Vec2 = Field(default=(0.0, 0.0), description="Destination r_d (length).")
+    obstacles: list[Vec2] = Field(
+        default=[], max_length=MAX_OBSTACLES, description="Point obstacles r_o (length)."
+    )
+    discs: list[DiscObstacle] = Field(
+        default=[], max_length=MAX_OBSTACLES, description="Disc obstacles (length)."
+    )
+    obstacle_range: PositiveReal = Field(
+        default=0.5,
+        description="d of beta_io: an obstacle whose boundary is d or farther from the agent "
+        "has beta_io = 1 (length).",
+    )
+    kappa: Real = Field(
+        default=1.0, ge=1.0, le=100.0,
+        description="Navigation function tuning parameter kappa (>= 1).",
+    )
+    c_d: NonNegativeReal = Field(default=0.5, description="Damping gain c_d (1/time).")
+    V_min: PositiveReal = Field(
+        default=0.6, lt=1.0,
+        description="The level V_i = V_min of the mission potential (values lie in [0, 1)).",
+    )
+    damping_region: Literal["above_vmin", "below_vmin", "everywhere"] = Field(
+        default="above_vmin",
+        description="Where -c_d v_i acts: above_vmin (V_i > V_min, eq. 3 as printed), "
+        "below_vmin (V_i <= V_min: around the destination, as the text motivates it), or "
+        "everywhere.",
+    )
+    adaptive_radius: StrictBool = Field(
+        default=True, description="Apply eq. 4; false keeps R_i = R for every agent."
+    )
+    radius_every: PositiveInt = Field(
+        default=100,
+        description="Evaluate eq. 4 at steps k > 0 with k % radius_every == 0 (before that "
+        "step's motion), synchronously for all agents.",
+    )
+    radius_floor: PositiveReal = Field(
+        default=0.25, description="R_i never halves below this (length)."
+    )
+    stuck_speed: PositiveReal = Field(
+        default=1e-3, description="Agent i counts as immobilised (v_i = 0) when |v_i| < this."
+    )
+    radius_rule: Literal["own", "min"] = Field(
+        default="own",
+        description="own: N_i = {j : |r_ij| <= R_i} and U_ij saturates at R_i, as printed "
+        "(neighbourhoods may be asymmetric). min: R_i replaced by min(R_i, R_j) (symmetric).",
+    )
+
+    def check_scenario(self, scenario: Scenario) -> None:
+        self._check_plane(scenario, "002")
+        if scenario.neighbours is None:
+            raise ValueError(
+                "model 'flocking_obstacles' needs a neighbours block: its radius is the "
+                "initial R_i of every agent"
+            )
+        radius = scenario.neighbours.radius
+        check_radius_exceeds_d(radius, self.potential)
+        if self.radius_floor > radius:
+            raise ValueError(
+                f"model.radius_floor = {self.radius_floor:g} exceeds the initial radius "
+                f"neighbours.radius = {radius:g}"
+            )
+        dx, dy = self.destination
+        for k, (x, y) in enumerate(self.obstacles):
+            if x == dx and y == dy:
+                raise ValueError(
+                    f"model.obstacles[{k}] lies on the destination: V_i is 0/0 there"
+                )
+        for k, disc in enumerate(self.discs):
+            if math.hypot(dx - disc.center[0], dy - disc.center[1]) <= disc.radius:
+                raise ValueError(f"model.discs[{k}] covers the destination {self.destination}")
+        self._check_dt(scenario, None)
