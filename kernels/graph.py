@@ -70,27 +70,30 @@ def metric_graph_kernel(inclusive: bool, periodic: bool, by_id: bool):
 
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):
-        # acc = (degree of i, a root of i's tree): i's root is found once, not per edge.
-        ids, parent, r2 = ti.static(S[0], S[1], S[2])
-        if k != i and within(d.dot(d), r2[0], inclusive):
+        # Each pair once (half stencil, k "after" i). acc = (i's degree count, a root of
+        # i's tree): i's root is found once per agent, not once per edge.
+        ids, parent, deg, r2 = ti.static(S[0], S[1], S[2], S[3])
+        if within(d.dot(d), r2[0], inclusive):
             acc[0] += 1
-            if k > i:
-                rk = find(parent, node(ids, k))
-                if rk != acc[1]:
-                    acc[1] = link(parent, acc[1], rk)
+            ti.atomic_add(deg[k], 1)
+            rk = find(parent, node(ids, k))
+            if rk != acc[1]:
+                acc[1] = link(parent, acc[1], rk)
         return acc
 
-    visit = make_visitor(pair)
+    visit = make_visitor(pair, half=True)
 
     @ti.kernel
     def graph(pos: nd, ids: nd, parent: nd, deg: nd, r2: nd,
               start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
+            deg[i] = 0
+        for i in range(pos.shape[0]):
             xi = ti.math.vec2(pos[i, 0], pos[i, 1])
             acc = ti.math.ivec2(0, find(parent, node(ids, i)))
             acc = visit(i, xi, acc, pos, ti.static((start, cid, gf, gi)),
-                        ti.static((ids, parent, r2)), periodic)
-            deg[i] = acc[0]
+                        ti.static((ids, parent, deg, r2)), periodic)
+            ti.atomic_add(deg[i], acc[0])
 
     return graph
 

@@ -232,10 +232,14 @@ class Grid:
         return (self.start, self.cid_sorted, self._gf_nd, self._gi_nd)
 
 
-def make_visitor(pair):
+def make_visitor(pair, half: bool = False):
     """Return a Taichi function `visit(i, xi, acc, pos, G, S, periodic)` that folds
     `acc = pair(i, k, d, acc, S)` over every agent k in the cells around position xi,
-    where pos is in bucket order and d = pos[k] - xi (minimum image in the box)."""
+    where pos is in bucket order and d = pos[k] - xi (minimum image in the box).
+
+    `half=True` visits each unordered pair once, from its first member: only the cells
+    "after" i's (the rest of its row, and the rows above) and, in i's own cell, k > i.
+    Symmetric relations (degrees, components) then cost half the candidates."""
 
     @ti.func
     def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
@@ -247,24 +251,36 @@ def make_visitor(pair):
             L = gf[1]
             c = periodic_cell(xi[0], xi[1], gf, nc)
             if nc >= 2 * R + 1:
-                # Rows of 2R+1 x-adjacent cells are one contiguous bucket range unless
-                # the row crosses the seam; a cell across the seam is read with the
-                # shift +-L that makes r_k + shift the image nearest r_i.
-                for b in range(2 * R + 1):
-                    ry = c[1] + b - R
+                # Rows of x-adjacent cells are one contiguous bucket range unless the row
+                # crosses the seam; a cell across the seam is read with the shift +-L
+                # that makes r_k + shift the image nearest r_i.
+                for b in range(ti.static(0 if half else -R), R + 1):
+                    ry = c[1] + b
                     by = (ry + nc) % nc
                     sy = ti.cast(ry - by, ti.f64) / nc * L
                     row = nc * by
-                    if c[0] >= R and c[0] + R < nc:
-                        for k in range(start[row + c[0] - R], start[row + c[0] + R + 1]):
+                    a0 = -R
+                    if ti.static(half):
+                        if b == 0:
+                            a0 = 0  # own cell and those to its right
+                    if c[0] + a0 >= 0 and c[0] + R < nc:
+                        k0 = start[row + c[0] + a0]
+                        if ti.static(half):
+                            if b == 0:
+                                k0 = i + 1
+                        for k in range(k0, start[row + c[0] + R + 1]):
                             d = ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] + sy - xi[1])
                             acc = pair(i, k, d, acc, S)
                     else:
-                        for a in range(2 * R + 1):
-                            rx = c[0] + a - R
+                        for a in range(a0, R + 1):
+                            rx = c[0] + a
                             bx = (rx + nc) % nc
                             sx = ti.cast(rx - bx, ti.f64) / nc * L
-                            for k in range(start[row + bx], start[row + bx + 1]):
+                            k0 = start[row + bx]
+                            if ti.static(half):
+                                if b == 0 and a == 0:
+                                    k0 = i + 1
+                            for k in range(k0, start[row + bx + 1]):
                                 d = ti.math.vec2(pos[k, 0] + sx - xi[0],
                                                  pos[k, 1] + sy - xi[1])
                                 acc = pair(i, k, d, acc, S)
@@ -274,18 +290,28 @@ def make_visitor(pair):
                     for b in range(nc):
                         bucket = (c[0] + a) % nc + nc * ((c[1] + b) % nc)
                         for k in range(start[bucket], start[bucket + 1]):
+                            if ti.static(half):
+                                if k <= i:
+                                    continue
                             d = ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] - xi[1])
                             d -= L * ti.round(d / L)
                             acc = pair(i, k, d, acc, S)
         else:
             c = plane_cell(xi[0], xi[1], gf)
-            for a in range(3):
-                tx = c[0] + a - 1
-                for b in range(3):
-                    ty = c[1] + b - 1
+            for b in range(ti.static(0 if half else -1), 2):
+                ty = c[1] + b
+                for a in range(-1, 2):
+                    if ti.static(half):
+                        if b == 0 and a < 0:
+                            continue
+                    tx = c[0] + a
                     want = plane_cell_id(tx, ty)
                     bucket = plane_bucket(tx, ty, gi[1])
-                    for k in range(start[bucket], start[bucket + 1]):
+                    k0 = start[bucket]
+                    if ti.static(half):
+                        if a == 0 and b == 0:
+                            k0 = i + 1  # i's own cell: i is in this bucket
+                    for k in range(k0, start[bucket + 1]):
                         if cid[k] == want:
                             d = ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] - xi[1])
                             acc = pair(i, k, d, acc, S)

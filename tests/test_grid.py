@@ -163,3 +163,32 @@ def test_build_is_deterministic(taichi_cpu):
     # Stable in both variants: the same permutation every time, serial or parallel.
     assert (perms[0] == perms[1]).all() and (perms[1] == perms[2]).all()
     assert sorted(perms[0]) == list(range(len(pos)))
+
+
+@pytest.mark.parametrize("inclusive", [True, False])
+@pytest.mark.parametrize("L", [None, 8.0, 2.5, 3.0])
+def test_half_stencil_graph_matches_brute_force(taichi_cpu, inclusive, L):
+    """Degrees and component count from the half-stencil union-find pass."""
+    from scipy.sparse.csgraph import connected_components
+
+    from kernels.graph import MetricGraph
+    from kernels.layout import SortedState
+
+    rng = np.random.default_rng(10)
+    r = 0.5
+    pos = rng.uniform(0, L or 8.0, size=(150, 2))
+    pos[:4] = [[1.0, 1.0], [1.5, 1.0], [1.0, 1.5], [1.0, 1.25]]  # pairs exactly at r
+    want = adjacency(pos, r, L, inclusive)
+    grid = Grid(len(pos), r, L)
+    st = SortedState({"pos": pos})
+    grid.build(st["pos"])
+    st.resort(grid)
+    graph = MetricGraph(len(pos), r, inclusive, L is not None)
+    obs = graph.observe(grid, st["pos"], st.ids)
+    deg = np.empty(len(pos), dtype=np.int64)
+    deg[st.ids_numpy()] = graph.deg.to_numpy()
+    assert (deg == want.sum(axis=1)).all()
+    n_comp = connected_components(want, directed=False)[0]
+    assert obs["components"] == n_comp
+    if L is None or L > 5:
+        assert 1 < n_comp < len(pos)  # a graph with something to get wrong
