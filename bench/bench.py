@@ -15,6 +15,7 @@ write (`baseline`), and the ratio.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import pkgutil
@@ -54,10 +55,8 @@ def measure_one(label: str, n: int, steps: int, backend: str) -> dict:
     spec["backend"] = backend
     warm = dict(spec, time=dict(spec["time"], steps=2))
     kernels.run(Scenario.model_validate(warm))
-    try:
+    with contextlib.suppress(OSError):  # not Linux: the peak then includes the warm-up
         Path("/proc/self/clear_refs").write_text("5")  # reset VmHWM to the current RSS
-    except OSError:
-        pass
     base = _peak_rss()
     spec["time"] = dict(spec["time"], steps=steps)
     sc = Scenario.model_validate(spec)

@@ -10,7 +10,7 @@ import os
 # user's output (the CLI prints its JSON summary there).
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
 
-from .engine import run  # noqa: E402
-from .result import BackendUnavailable, FrameSink, RunResult, SimulationDiverged  # noqa: E402
+from .engine import run
+from .result import BackendUnavailable, FrameSink, RunResult, SimulationDiverged
 
 __all__ = ["BackendUnavailable", "FrameSink", "RunResult", "SimulationDiverged", "run"]
