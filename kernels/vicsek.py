@@ -33,13 +33,6 @@ RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
 _R2, _V0DT, _ETA, _G, _L, _THETA0 = range(6)
 
 
-@ti.kernel
-def _unit_vectors(theta: nd, ew: nd):
-    for i in range(theta.shape[0]):
-        ew[i, 0] = ti.cos(theta[i])
-        ew[i, 1] = ti.sin(theta[i])
-
-
 @cache
 def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool):
     """Compile-time specialised step for one rule and geometry."""
@@ -58,8 +51,8 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool):
     visit = make_visitor(pair)
 
     @ti.kernel
-    def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, prm: nd,
-             key: ti.u32, bad: nd, start: nd, cid: nd, gf: nd, gi: nd):
+    def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, ew_out: nd,
+             prm: nd, key: ti.u32, bad: nd, start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
             xi = ti.math.vec2(pos[i, 0], pos[i, 1])
             acc = visit(i, xi, ti.math.vec3(0.0), pos, ti.static((start, cid, gf, gi)),
@@ -77,10 +70,11 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool):
             if ti.static(rule == RULES["leader"]):
                 if ids[i] == 0:
                     new = prm[_THETA0]
-            phi = th
+            e_new = ti.math.vec2(ti.cos(new), ti.sin(new))
+            e = ti.math.vec2(ew[i, 0], ew[i, 1])  # e(theta_i(t))
             if ti.static(move_new):
-                phi = new
-            x = xi + prm[_V0DT] * ti.math.vec2(ti.cos(phi), ti.sin(phi))
+                e = e_new
+            x = xi + prm[_V0DT] * e
             if ti.static(periodic):
                 L = prm[_L]
                 x -= L * ti.floor(x / L)
@@ -90,6 +84,8 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool):
             pos_out[i, 0] = x[0]
             pos_out[i, 1] = x[1]
             theta_out[i] = new
+            ew_out[i, 0] = e_new[0]  # the unit vectors travel with the state: each heading's
+            ew_out[i, 1] = e_new[1]  # cos and sin are computed once, here
             v = new + x[0] + x[1]  # NaN if any term is NaN or infinite
             if ti.math.isnan(v) or ti.math.isinf(v):
                 ti.atomic_add(bad[0], 1)
@@ -113,8 +109,8 @@ class VicsekKernel(ModelKernel):
         theta = init.headings
         if p.rule == "leader":
             theta[0] = p.leader_heading
-        self.state = SortedState({"pos": init.positions, "theta": theta})
-        self.ew = ti.ndarray(ti.f64, shape=(n, 2))
+        ew = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+        self.state = SortedState({"pos": init.positions, "theta": theta, "ew": ew})
         self.grid = Grid(n, radius, L if self.periodic else None)
         self.graph = MetricGraph(n, radius, scenario.inclusive, self.periodic)
         self.prm = ti.ndarray(ti.f64, shape=8)
@@ -146,15 +142,14 @@ class VicsekKernel(ModelKernel):
         st = self.state
         if self.track:
             self._track_linked(step)
-        if self.p.rule == "vicsek" or self.p.position_update == "old_heading":
-            _unit_vectors(st["theta"], self.ew)
         self.bad.fill(0)
         self.kernel(
-            st["pos"], st["theta"], self.ew, st.ids, st.scratch("pos"), st.scratch("theta"),
-            self.prm, rng.step_key(self.scenario.seed, 0, step), self.bad, *self.grid.view(),
+            st["pos"], st["theta"], st["ew"], st.ids, st.scratch("pos"), st.scratch("theta"),
+            st.scratch("ew"), self.prm, rng.step_key(self.scenario.seed, 0, step), self.bad,
+            *self.grid.view(),
         )
-        st.swap("pos")
-        st.swap("theta")
+        for name in ("pos", "theta", "ew"):
+            st.swap(name)
         if self.bad.to_numpy()[0]:
             raise SimulationDiverged(
                 step, "heading/position",
@@ -176,8 +171,8 @@ class VicsekKernel(ModelKernel):
         self._sort(step)
         st = self.state
         theta = st["theta"].to_numpy()
-        c, s = np.cos(theta), np.sin(theta)
-        obs = {"polarization": float(np.hypot(c.sum(), s.sum()) / self.n)}
+        e = st["ew"].to_numpy().sum(axis=0)  # sum of the unit vectors e(theta_i)
+        obs = {"polarization": float(np.hypot(e[0], e[1]) / self.n)}
         if self.p.rule == "vicsek":
             obs["heading_spread"] = circular_spread(theta)
         else:
