@@ -255,9 +255,14 @@ def make_visitor(pair, half: bool = False):
                 # crosses the seam; a cell across the seam is read with the shift +-L
                 # that makes r_k + shift the image nearest r_i.
                 for b in range(ti.static(0 if half else -R), R + 1):
-                    ry = c[1] + b
-                    by = (ry + nc) % nc
-                    sy = ti.cast(ry - by, ti.f64) / nc * L
+                    by = c[1] + b
+                    sy = 0.0
+                    if by < 0:
+                        by += nc
+                        sy = -L
+                    elif by >= nc:
+                        by -= nc
+                        sy = L
                     row = nc * by
                     a0 = -R
                     if ti.static(half):
@@ -273,9 +278,14 @@ def make_visitor(pair, half: bool = False):
                             acc = pair(i, k, d, acc, S)
                     else:
                         for a in range(a0, R + 1):
-                            rx = c[0] + a
-                            bx = (rx + nc) % nc
-                            sx = ti.cast(rx - bx, ti.f64) / nc * L
+                            bx = c[0] + a
+                            sx = 0.0
+                            if bx < 0:
+                                bx += nc
+                                sx = -L
+                            elif bx >= nc:
+                                bx -= nc
+                                sx = L
                             k0 = start[row + bx]
                             if ti.static(half):
                                 if b == 0 and a == 0:
