@@ -143,6 +143,14 @@ def test_same_seed_same_trajectory_bit_for_bit(taichi_cpu):
     assert not (a.theta[-1] == c.theta[-1]).all()
 
 
+def test_thread_count_does_not_change_the_trajectory(taichi_cpu):
+    base = scenario(eta=1.0, N=3000, L=25.0, steps=10)
+    one = run_frames(base.model_copy(update={"threads": 1}))[1]
+    two = run_frames(base.model_copy(update={"threads": 2}))[1]
+    assert all((x == y).all() for x, y in zip(one.theta, two.theta, strict=True))
+    assert all((x == y).all() for x, y in zip(one.pos, two.pos, strict=True))
+
+
 def test_linked_intervals_counted(taichi_cpu):
     sc = scenario(rule="average", N=40, L=4.0, steps=30, every=0)  # dense: always connected
     result = kernels.run(sc)
