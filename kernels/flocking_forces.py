@@ -4,8 +4,10 @@ step, the graph observables and the adaptive radius.
 Control law for agent i (paper 000 eq. 3; paper 002 eq. 3):
   u_i = sum_{j in N_i} (v_j - v_i) + sum_{j : s_ij < R_ij} (V'(s_ij) / s_ij) (r_j - r_i)
         [- grad V_i(r_i) - c_d v_i where the damping region holds]     (paper 002 only)
-with N_i from a fixed graph (CSR, potential never saturated: eq. 4-5), or from the grid:
-j in N_i iff s_ij < R_ij (or <=), the potential saturated at s >= R_ij (eq. 10). R_ij is
+with N_i from a fixed graph (CSR, potential never saturated: eq. 4-5), or metric: j in N_i
+iff s_ij < R_ij (or <=), the potential saturated at s >= R_ij (eq. 10), found on a grid
+(kernels/flocking_grid.py) or, at small N, over all pairs, through one visitor interface.
+R_ij is
   uniform  R                                     (paper 000, section 5)
   own      R_i, agent i's adaptive radius        (paper 002, eq. 4 as printed)
   min      min(R_i, R_j)                         (a symmetric variant)
@@ -19,8 +21,9 @@ from functools import cache
 import taichi as ti
 
 from . import potentials
+from .flocking_grid import make_dense_visitor
 from .flocking_navigation import make_navigation
-from .graph import union
+from .graph import find, link
 from .grid import make_visitor, within
 
 nd = ti.types.ndarray()
@@ -30,8 +33,7 @@ P_SIZE = 8
 UNIFORM, OWN, MIN = 0, 1, 2
 RADIUS_RULES = {"uniform": UNIFORM, "own": OWN, "min": MIN}
 NO_DAMPING, ABOVE_VMIN, BELOW_VMIN, EVERYWHERE = 0, 1, 2, 3
-DAMPING = {"none": NO_DAMPING, "above_vmin": ABOVE_VMIN, "below_vmin": BELOW_VMIN,
-           "everywhere": EVERYWHERE}
+DAMPING = {"above_vmin": ABOVE_VMIN, "below_vmin": BELOW_VMIN, "everywhere": EVERYWHERE}
 NEAREST_NONE = 1e300
 
 
@@ -53,32 +55,58 @@ def nonfinite(x, v):
     return ti.math.isnan(s) or ti.math.isinf(s)
 
 
+def make_all_pairs_visitor(pair):
+    """grid.make_visitor's interface, folding `pair` over every agent k (no grid: O(N^2),
+    for small N, where rebuilding a grid costs more than the pairs)."""
+
+    @ti.func
+    def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
+              periodic: ti.template()):
+        for k in range(pos.shape[0]):
+            acc = pair(i, k, ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] - xi[1]), acc, S)
+        return acc
+
+    return visit
+
+
+VISITORS = {"all_pairs": make_all_pairs_visitor, "hash": make_visitor,
+            "dense": make_dense_visitor}
+
+
+def visitor(pair, search: str):
+    """The neighbour loop for a search: all pairs, the engine's hashed grid, a DenseGrid."""
+    return VISITORS[search](pair)
+
+
 @cache
 def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
-                 has_obstacles: bool, unit_kappa: bool):
-    """(euler, accel) kernels over the neighbour grid, specialised at compile time."""
+                 has_obstacles: bool, unit_kappa: bool, search: str):
+    """(euler, accel) kernels over metric neighbours (`search`: all_pairs, hash, dense),
+    specialised at compile time."""
     navigation = make_navigation(has_obstacles, unit_kappa)
 
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):
         vel, rad, prm = ti.static(S[0], S[1], S[2])
-        if k != i:
-            s2 = d.dot(d)
-            r2 = pair_radius2(rule, i, k, rad, prm)
-            if within(s2, r2, inclusive):  # alignment: j in N_i
-                acc += ti.math.vec2(vel[k, 0] - vel[i, 0], vel[k, 1] - vel[i, 1])
-            if s2 < r2:  # U_ij = V(s) below R, constant (no force) from R on
-                acc += potentials.force_factor(s2, prm[P_A]) * d
-        return acc
+        # Branch-free: acc = (sum_{N_i} v_j + sum_{s < R} f d, |N_i|); the alignment
+        # sum_{N_i} (v_j - v_i) is completed after the loop as sum v_j - |N_i| v_i.
+        s2 = d.dot(d)
+        r2 = pair_radius2(rule, i, k, rad, prm)
+        other = k != i
+        w = ti.cast(within(s2, r2, inclusive) & other, ti.f64)  # j in N_i
+        # U_ij = V(s) below R, constant (no force) from R on; select drops f(0) = inf.
+        f = ti.select((s2 < r2) & other, potentials.force_factor(s2, prm[P_A]), 0.0)
+        return acc + ti.math.vec3(w * vel[k, 0] + f * d[0], w * vel[k, 1] + f * d[1], w)
 
-    visit = make_visitor(pair)
+    visit = visitor(pair, search)
 
     @ti.func
     def control(i, xi, vi, pos: ti.template(), vel: ti.template(), rad: ti.template(),
-                prm: ti.template(), nav: ti.template(), G: ti.template(), O: ti.template()):
-        acc = visit(i, xi, ti.math.vec2(0.0), pos, G, ti.static((vel, rad, prm)), False)
+                prm: ti.template(), nav: ti.template(), G: ti.template(), OB: ti.template()):
+        sums = visit(i, xi, ti.math.vec3(0.0), pos, G, ti.static((vel, rad, prm)), False)
+        acc = ti.math.vec2(sums[0], sums[1]) - sums[2] * vi
         if ti.static(mission):
-            nv = navigation(xi, nav, O)
+            nv = navigation(xi, nav, OB)
             acc -= ti.math.vec2(nv[1], nv[2])
             if ti.static(damping == EVERYWHERE):
                 acc -= prm[P_CD] * vi
@@ -173,51 +201,72 @@ def csr_potential(pos: nd, indptr: nd, indices: nd, prm: nd, pot: nd):
         pot[i] = acc
 
 
+@ti.kernel
+def root_labels(parent: nd, labels: nd):
+    """labels[i] = the root of i's tree (its connected component)."""
+    for i in range(parent.shape[0]):
+        labels[i] = find(parent, i)
+
+
+Observation = ti.types.vector(6, ti.f64)
+O_DEG, O_NEAR_D2, O_NEAR_K, O_VSUM, O_NSAT, O_ROOT = range(6)
+
+
 @cache
-def grid_observe_kernel(rule: int, inclusive: bool):
+def grid_observe_kernel(rule: int, inclusive: bool, search: str):
     """Kernel writing, per agent (grid order): valency |N_i|, the nearest agent among the
-    3x3 cells (squared distance and slot), sum_{j != i} (U_ij - V(R_ij)) (the saturated
-    potential less its constant), and the union of every edge into `parent`."""
+    visited candidates (squared distance and slot), sum_{j != i} (U_ij - V(R_ij)) (the
+    saturated potential less its constant), and the union of every edge into `parent`
+    (i's root found once and carried along, as in kernels/graph.py)."""
 
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):
         rad, prm, parent = ti.static(S[0], S[1], S[2])
         if k != i:
             s2 = d.dot(d)
-            if s2 < acc[1]:
-                acc[1] = s2
-                acc[2] = ti.cast(k, ti.f64)
+            if s2 < acc[O_NEAR_D2]:
+                acc[O_NEAR_D2] = s2
+                acc[O_NEAR_K] = ti.cast(k, ti.f64)
             r2 = pair_radius2(rule, i, k, rad, prm)
             if within(s2, r2, inclusive):
-                acc[0] += 1.0
-                if ti.static(rule == OWN):  # j in N_i need not imply i in N_j
-                    union(parent, i, k)
-                elif k > i:
-                    union(parent, i, k)
+                acc[O_DEG] += 1.0
+                # own: j in N_i need not imply i in N_j, so every edge is joined from i.
+                if ti.static(rule == OWN) or k > i:
+                    root = ti.cast(acc[O_ROOT], ti.i32)
+                    rk = find(parent, k)
+                    if rk != root:
+                        acc[O_ROOT] = ti.cast(link(parent, root, rk), ti.f64)
             if s2 < r2:
-                acc[3] += potentials.value(s2, prm[P_A], prm[P_C]) \
-                    - potentials.value(r2, prm[P_A], prm[P_C])
+                acc[O_VSUM] += potentials.value(s2, prm[P_A], prm[P_C])
+                if ti.static(rule == MIN):  # R_ij varies with j
+                    acc[O_VSUM] -= potentials.value(r2, prm[P_A], prm[P_C])
+                else:
+                    acc[O_NSAT] += 1.0
         return acc
 
-    visit = make_visitor(pair)
+    visit = visitor(pair, search)
 
     @ti.kernel
     def observe(pos: nd, rad: nd, prm: nd, parent: nd, deg: nd, near_d2: nd, near_k: nd,
                 pot: nd, start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
             xi = ti.math.vec2(pos[i, 0], pos[i, 1])
-            acc = visit(i, xi, ti.math.vec4(0.0, NEAREST_NONE, -1.0, 0.0), pos,
-                        ti.static((start, cid, gf, gi)), ti.static((rad, prm, parent)), False)
-            deg[i] = ti.cast(acc[0], ti.i32)
-            near_d2[i] = acc[1]
-            near_k[i] = ti.cast(acc[2], ti.i32)
-            pot[i] = acc[3]
+            acc = Observation(0.0, NEAREST_NONE, -1.0, 0.0, 0.0,
+                              ti.cast(find(parent, i), ti.f64))
+            acc = visit(i, xi, acc, pos, ti.static((start, cid, gf, gi)),
+                        ti.static((rad, prm, parent)), False)
+            deg[i] = ti.cast(acc[O_DEG], ti.i32)
+            near_d2[i] = acc[O_NEAR_D2]
+            near_k[i] = ti.cast(acc[O_NEAR_K], ti.i32)
+            # V(R_i) once per agent: R_i is R (uniform) or agent i's own radius.
+            r2 = pair_radius2(rule, i, i, rad, prm)
+            pot[i] = acc[O_VSUM] - acc[O_NSAT] * potentials.value(r2, prm[P_A], prm[P_C])
 
     return observe
 
 
 @cache
-def radius_kernel(rule: int, inclusive: bool):
+def radius_kernel(rule: int, inclusive: bool, search: str):
     """Adaptive radius, paper 002 eq. 4, synchronously (reads rad, writes rad_out):
     R_i' = max(R_i / 2, floor) if |v_i| < stuck_speed and V_i > V_min,
     R_i' = max(R_i, R_j for j in N_i) otherwise. counts += (halved, increased)."""
@@ -229,7 +278,7 @@ def radius_kernel(rule: int, inclusive: bool):
             acc = ti.max(acc, rad[k])
         return acc
 
-    visit = make_visitor(pair)
+    visit = visitor(pair, search)
 
     @ti.kernel
     def update(pos: nd, vel: nd, rad: nd, rad_out: nd, mission: nd, prm: nd, counts: nd,

@@ -7,9 +7,11 @@ For agent position x, destination r_d and obstacles o (p. 3 of paper 002):
   B = prod_o beta_o,  a = |x - r_d|^2,  D = a^kappa + B
   V = a / D^(1/kappa)
   grad V = D^(-1/kappa) 2 (x - r_d) - (a / kappa) D^(-1/kappa - 1) grad D,
-  grad D = 2 kappa a^(kappa - 1) (x - r_d) + grad B   (kappa = 1: grad V = (2 (x - r_d) B - a grad B) / D^2)
+  grad D = 2 kappa a^(kappa - 1) (x - r_d) + grad B
+  (kappa = 1: grad V = (2 (x - r_d) B - a grad B) / D^2)
 B and grad B are folded over the obstacles within reach by the product rule,
-(B, grad B) <- (B beta_o, beta_o grad B + B grad beta_o), grad beta_o = dbeta/ddelta (x - r_o)/|x - r_o|,
+(B, grad B) <- (B beta_o, beta_o grad B + B grad beta_o),
+grad beta_o = dbeta/ddelta (x - r_o) / |x - r_o|,
 so an obstacle with beta_o = 0 needs no division. Only obstacles with delta_o < d matter,
 so obstacles are bucketed once in a uniform grid of cell d + max rho (kernels.grid, hashed:
 memory per obstacle, not per unit area) and an agent outside their bounding box (grown by
@@ -97,14 +99,14 @@ _visit_obstacles = make_visitor(_obstacle_pair)
 
 @cache
 def make_navigation(has_obstacles: bool, unit_kappa: bool):
-    """Taichi function navigation(x, nav, O) -> (V, dV/dx, dV/dy, min delta) with O the
+    """Taichi function navigation(x, nav, OB) -> (V, dV/dx, dV/dy, min delta) with OB the
     obstacle grid's view; specialised for obstacle-free worlds and kappa = 1."""
 
     @ti.func
-    def navigation(xi, nav: ti.template(), O: ti.template()):
+    def navigation(xi, nav: ti.template(), OB: ti.template()):
         acc = ti.math.vec4(1.0, 0.0, 0.0, FAR)
         if ti.static(has_obstacles):
-            opos, orad, start, cid, gf, gi = ti.static(O[0], O[1], O[2], O[3], O[4], O[5])
+            opos, orad, start, cid, gf, gi = ti.static(OB[0], OB[1], OB[2], OB[3], OB[4], OB[5])
             inside = (nav[NAV_X0] <= xi[0]) & (xi[0] <= nav[NAV_X1]) & (nav[NAV_Y0] <= xi[1]) \
                 & (xi[1] <= nav[NAV_Y1])
             if inside:

@@ -7,6 +7,7 @@ Right-hand side, for every agent at once from the state at time t (eq. 1-2, 6, 1
 Integrators: explicit Euler r(t + dt) = r(t) + dt rdot(t); classical RK4 with stages at t,
 t + dt/2, t + dt (each stage re-buckets its positions, so neighbours are always exact).
 Neighbours come from the uniform grid (cell = d); g(d) = 0, so < and <= give the same forces.
+Above `max_exact_candidates` an Euler step coarse-grains far pairs (formation_dense.py).
 Two agents at the same position (g singular) stop the run.
 
 Observables (at observation steps only): formation error against r_id + a with the lag a of
@@ -23,16 +24,20 @@ import taichi as ti
 from schemas import Scenario
 from schemas.formation import FormationParams, SaturatingF
 
+from .formation_dense import bucket_aggregates, coarse_euler, max_count, stencil_reach
 from .formation_forces import (
     F_KINDS,
     G_KINDS,
     P_D2,
     P_DT,
+    SLOT0,
+    SLOT_LEN,
     attract,
     attraction_energy,
     force_params,
     g_over_s,
     lag_length,
+    leader,
     pair_energy,
 )
 from .formation_path import make_path
@@ -46,26 +51,7 @@ from .model import ModelKernel, register_kernel
 from .result import SimulationDiverged
 
 nd = ti.types.ndarray()
-# prm: the gains (formation_forces.P_*), then per time slot s (0: t, 1: t + dt/2, 2: t + dt)
-# the leader p(t) and the 2x2 weights of the two stored formations A and B (F1 only).
-_SLOT0, _SLOT_LEN = 8, 10
 _NO_PAIR = 1e300  # nearest-candidate sentinel
-
-
-@ti.func
-def leader(i, ids: ti.template(), ba: ti.template(), bb: ti.template(), prm: ti.template(),
-           slot, f1: ti.template(), blend: ti.template()):
-    """l_i = p(t) (F2) or p(t) + M_A A[id] + M_B B[id] (F1)."""
-    o = _SLOT0 + _SLOT_LEN * slot
-    r = ti.math.vec2(prm[o], prm[o + 1])
-    if ti.static(f1):
-        a = ids[i]
-        r += ti.math.vec2(prm[o + 2] * ba[a, 0] + prm[o + 3] * ba[a, 1],
-                          prm[o + 4] * ba[a, 0] + prm[o + 5] * ba[a, 1])
-        if ti.static(blend):
-            r += ti.math.vec2(prm[o + 6] * bb[a, 0] + prm[o + 7] * bb[a, 1],
-                              prm[o + 8] * bb[a, 0] + prm[o + 9] * bb[a, 1])
-    return r
 
 
 @cache
@@ -86,7 +72,7 @@ def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: 
 
     @ti.func
     def pair_obs(i, k, dv, acc, S: ti.template()):
-        # acc: repulsion x, y, coincident, degree, sum of G, nearest squared distance
+        # acc: repulsion x, y, coincident (unused here), degree, sum of G, nearest d^2
         prm = ti.static(S[0])
         d2 = dv.dot(dv)
         if k != i:
@@ -157,7 +143,6 @@ def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: 
             aux[i, 0] = acc[3]
             aux[i, 1] = acc[4]
             aux[i, 2] = acc[5]
-            aux[i, 3] = acc[2]
 
     return euler, rates, observe
 
@@ -213,8 +198,8 @@ class FormationKernel(ModelKernel):
         self.state = SortedState({"pos": init.positions})
         self.grid = Grid(n, d, None)
         self.graph: MetricGraph | None = None
-        self.prm_host = np.zeros(_SLOT0 + 3 * _SLOT_LEN)
-        self.prm_host[: _SLOT0 - 2] = force_params(p, d, dt)
+        self.prm_host = np.zeros(SLOT0 + 3 * SLOT_LEN)
+        self.prm_host[: SLOT0 - 2] = force_params(p, d, dt)
         self.prm = ti.ndarray(ti.f64, shape=self.prm_host.shape)
         rows = n if self.f1 else 1
         self.b_dev = [ti.ndarray(ti.f64, shape=(rows, 2)) for _ in range(2)]
@@ -231,6 +216,10 @@ class FormationKernel(ModelKernel):
             self.y = ti.ndarray(ti.f64, shape=(n, 2))
             self.k = [ti.ndarray(ti.f64, shape=(n, 2)) for _ in range(4)]
         self.obs_out: tuple | None = None
+        self.cap = p.max_exact_candidates if p.integrator == "euler" else None
+        self.fine: tuple[int, Grid] | None = None  # the dense regime's grid, by reach m
+        self.agg: tuple | None = None
+        self.coarse_steps, self.max_reach = 0, 1  # steps in the dense regime, largest m
         self._sorted_for = -1
         self.now = 0  # the step index of the current state
 
@@ -248,7 +237,7 @@ class FormationKernel(ModelKernel):
                 self.b_dev[free].from_numpy(self.schedule.stored[k])
                 self.b_held[free] = k
         for s, (t, w) in enumerate(zip(times, weights, strict=True)):
-            o = _SLOT0 + _SLOT_LEN * s
+            o = SLOT0 + SLOT_LEN * s
             self.prm_host[o: o + 2] = self.path.position(t)
             mats = [w.get(self.b_held[j], np.zeros((2, 2))) for j in range(2)]
             self.prm_host[o + 2: o + 6] = mats[0].ravel()
@@ -280,20 +269,52 @@ class FormationKernel(ModelKernel):
                 "stiffness at close range)"
             )
 
-    def step(self, step: int) -> None:
+    def _reach(self, step: int) -> int:
+        """Sort the state for an Euler step: by the d-grid (returns 1, exact), or, when the
+        densest d-cell holds more than cap/9 agents, by a grid of side d/m (returns m)."""
         self._sort(step)
+        if self.cap is None:
+            return 1
+        densest = max_count(self.grid.count)
+        if 9 * densest <= self.cap:
+            return 1
+        m = stencil_reach(densest)
+        if self.fine is None or self.fine[0] != m:
+            self.fine = (m, Grid(self.n, self.d / m, None))
+        fine = self.fine[1]
+        fine.build(self.state["pos"], step)
+        self.state.resort(fine)
+        self._sorted_for = -1
+        if self.agg is None:
+            self.agg = (ti.ndarray(ti.f64, shape=(fine.n_buckets, 3)),
+                        ti.ndarray(ti.i64, shape=fine.n_buckets))
+        start, cid, _, _ = fine.view()
+        bucket_aggregates(self.state["pos"], start, cid, *self.agg)
+        return m
+
+    def step(self, step: int) -> None:
         st = self.state
         t = step * self.dt
         self.bad.fill(0)
         if self.p.integrator == "euler":
+            m = self._reach(step)
+            if m > 1:
+                self.coarse_steps += 1
+                self.max_reach = max(self.max_reach, m)
             blend = self._load_times([t])
-            euler, _, _ = self._kernels(blend)
-            euler(st["pos"], st.ids, *self.b_dev, st.scratch("pos"), self.prm, self.bad,
-                  *self.grid.view())
+            if m == 1:
+                euler, _, _ = self._kernels(blend)
+                euler(st["pos"], st.ids, *self.b_dev, st.scratch("pos"), self.prm, self.bad,
+                      *self.grid.view())
+            else:
+                coarse = coarse_euler(self.fkind, self.gkind, self.f1, blend, self.inclusive)
+                coarse(st["pos"], st.ids, *self.b_dev, st.scratch("pos"), self.prm, self.bad,
+                       m, *self.agg, *self.fine[1].view())
             self._check(step)
             st.swap("pos")
             self.now = step + 1
             return
+        self._sort(step)
         blend = self._load_times([t, t + 0.5 * self.dt, t + self.dt])
         _, rates, _ = self._kernels(blend)
         x, (k1, k2, k3, k4) = st["pos"], self.k
@@ -327,7 +348,7 @@ class FormationKernel(ModelKernel):
         _, _, observe = self._kernels(blend)
         if self.obs_out is None:
             self.obs_out = (ti.ndarray(ti.f64, shape=(self.n, 2)),
-                            ti.ndarray(ti.f64, shape=(self.n, 4)))
+                            ti.ndarray(ti.f64, shape=(self.n, 3)))
         vel, aux = self.obs_out
         observe(st["pos"], st.ids, *self.b_dev, vel, aux, self.prm, *self.grid.view())
         return {"pos": st["pos"].to_numpy(), "vel": vel.to_numpy(), "aux": aux.to_numpy(),
@@ -422,4 +443,7 @@ class FormationKernel(ModelKernel):
             "velocity_mismatch_max"]
 
     def extra(self) -> dict[str, Any]:
-        return {"leader_arrival_time": self.path.arrival_time}
+        return {
+            "leader_arrival_time": self.path.arrival_time,
+            "dense_regime": {"steps": self.coarse_steps, "max_reach": self.max_reach},
+        }

@@ -9,6 +9,7 @@ Taichi side, selected at compile time by kind (F_*, G_* below), runtime gains in
                  inverse        g(s) = -k_g (1/s - 1/d)
                  inverse_square g(s) = -k_g (1/s^2 - 1/d^2)
   pair_energy(s) = G(s) = int_d^s g                (the pair term of V1, eq. 10, and V2, eq. 16)
+  leader(i)    = the point agent i is attracted to: p(t) (F2) or p(t) + b_i(t) (F1)
 numpy side: F(s) = int_0^s f (the leader term of V1/V2) and the steady lag |a| = f^-1(|q|)
 solving eq. 8.
 """
@@ -20,8 +21,11 @@ from schemas.formation import FormationParams, LinearF, QuadraticF, SaturatingF
 
 F_KINDS = {"linear": 0, "quadratic": 1, "saturating": 2}
 G_KINDS = {"inverse": 0, "inverse_square": 1}
-# prm slots shared by every formation kernel
+# prm slots shared by every formation kernel: the gains, then per time slot s (0: t,
+# 1: t + dt/2, 2: t + dt) the leader p(t) and the 2x2 weights of the two stored formations
+# A and B (F1 only).
 P_FA, P_FB, P_KG, P_D, P_D2, P_DT = range(6)
+SLOT0, SLOT_LEN = 8, 10
 
 
 def force_params(p: FormationParams, d: float, dt: float) -> np.ndarray:
@@ -30,6 +34,22 @@ def force_params(p: FormationParams, d: float, dt: float) -> np.ndarray:
     fa = f.c if isinstance(f, QuadraticF) else f.k
     fb = f.v_max if isinstance(f, SaturatingF) else 0.0
     return np.array([fa, fb, p.repulsion.k_g, d, d * d, dt], dtype=np.float64)
+
+
+@ti.func
+def leader(i, ids: ti.template(), ba: ti.template(), bb: ti.template(), prm: ti.template(),
+           slot, f1: ti.template(), blend: ti.template()):
+    """l_i = p(t) (F2) or p(t) + M_A A[id] + M_B B[id] (F1)."""
+    o = SLOT0 + SLOT_LEN * slot
+    r = ti.math.vec2(prm[o], prm[o + 1])
+    if ti.static(f1):
+        a = ids[i]
+        r += ti.math.vec2(prm[o + 2] * ba[a, 0] + prm[o + 3] * ba[a, 1],
+                          prm[o + 4] * ba[a, 0] + prm[o + 5] * ba[a, 1])
+        if ti.static(blend):
+            r += ti.math.vec2(prm[o + 6] * bb[a, 0] + prm[o + 7] * bb[a, 1],
+                              prm[o + 8] * bb[a, 0] + prm[o + 9] * bb[a, 1])
+    return r
 
 
 @ti.func

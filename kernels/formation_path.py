@@ -45,7 +45,7 @@ class StraightLine(LeaderPath):
         self.end = target
         length = float(np.hypot(*(target - start)))
         self.arrival_time = arrival_time if arrival_time is not None else length / speed
-        self.q = (target - start) / self.arrival_time
+        self.q = (target - start) / self.arrival_time if length > 0.0 else np.zeros(2)
 
     def position(self, t: float) -> np.ndarray:
         if t >= self.arrival_time:

@@ -8,6 +8,7 @@ D3  every connected component of the neighbour graph is a "connected formation a
     hull of the component: the directions from r^ to its agents leave no angular gap
     larger than pi, and a gap of exactly pi is allowed only when every agent lies on one
     line through r^, on both sides. Agents within the tolerance of r^ count as at r^.
+Components come from the engine's union-find forest (`roots`).
 """
 
 from __future__ import annotations

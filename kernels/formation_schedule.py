@@ -57,4 +57,9 @@ class OffsetSchedule:
 
     def at(self, t: float) -> np.ndarray:
         """b_i(t), (N, 2) in agent-id order."""
-        return sum(self.stored[k] @ m.T for k, m in self.weights(t).items())
+        b = np.zeros_like(self.stored[0])
+        for k, m in self.weights(t).items():
+            x, y = self.stored[k][:, 0], self.stored[k][:, 1]
+            b[:, 0] += m[0, 0] * x + m[0, 1] * y
+            b[:, 1] += m[1, 0] * x + m[1, 1] * y
+        return b

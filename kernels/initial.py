@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +41,12 @@ def initial_state(scenario: Scenario) -> InitialState:
             pos = rng.uniform(0.0, space.L, size=(n, 2))
         elif region.kind == "box":
             pos = rng.uniform(region.low, region.high, size=(n, 2))
+        elif region.kind == "lattice":
+            side = math.ceil(math.sqrt(n))
+            k = np.arange(n)
+            grid = np.stack([k % side, k // side], axis=1).astype(np.float64)
+            jitter = rng.uniform(-region.jitter, region.jitter, size=(n, 2))
+            pos = np.asarray(region.low) + region.spacing * (grid + jitter)
         else:
             rad = region.radius * np.sqrt(rng.uniform(size=n))
             ang = rng.uniform(-np.pi, np.pi, size=n)

@@ -68,16 +68,19 @@ def _random_connected(n: int, m: int, rng: np.random.Generator) -> tuple[np.ndar
         pool = np.setdiff1d(a.astype(np.int64) * n + b, tree_keys, assume_unique=True)
         extra = rng.choice(pool, size=need, replace=False)
     else:
-        # Sparse: sample pairs in batches, drop loops, repeats and tree edges.
+        # Sparse: sample pairs in batches, drop loops, repeats and tree edges (sort-based
+        # set operations: numpy's hash-based unique is far slower at 10^7 keys).
+        tree_sorted = np.sort(tree_keys)
         extra = np.empty(0, dtype=np.int64)
         while extra.size < need:
             k = int(1.2 * (need - extra.size)) + 64
             a = rng.integers(0, n, size=k, dtype=np.int64)
             b = rng.integers(0, n, size=k, dtype=np.int64)
-            keys = np.minimum(a, b) * n + np.maximum(a, b)
-            keys = keys[a != b]
-            keys = np.setdiff1d(keys, tree_keys)  # sorted, unique
-            extra = np.union1d(extra, keys)
+            keys = np.concatenate([extra, (np.minimum(a, b) * n + np.maximum(a, b))[a != b]])
+            keys.sort()
+            keys = keys[np.r_[True, keys[1:] != keys[:-1]]]
+            at = np.minimum(np.searchsorted(tree_sorted, keys), len(tree_sorted) - 1)
+            extra = keys[tree_sorted[at] != keys]
         extra = rng.choice(extra, size=need, replace=False)
     return np.concatenate([tu, extra // n]), np.concatenate([tv, extra % n])
 

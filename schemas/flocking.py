@@ -14,8 +14,9 @@ paper 002's 1/s^2 + log s^2 (a = 1, c = 0, minimum at s = 1).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, ClassVar, Literal
+from typing import TYPE_CHECKING, Annotated, ClassVar, Literal
 
+import pydantic
 from pydantic import Field, model_validator
 
 from .base import NonNegativeInt, PositiveInt, PositiveReal, Strict
@@ -30,6 +31,9 @@ MAX_GRAPH_EDGES = 50_000_000
 # Explicit stability limits on the real axis, h * |eigenvalue|: semi-implicit Euler on an
 # undamped oscillator (h omega < 2) and on pure damping (h lambda < 2); classic RK4 (2.78).
 STABILITY = {"semi_implicit_euler": 2.0, "rk4": 2.78}
+# neighbour_search "auto" visits all pairs up to this N; "all_pairs" is refused above the max.
+ALL_PAIRS_AUTO = 64
+ALL_PAIRS_MAX = 4096
 
 Integrator = Literal["semi_implicit_euler", "rk4"]
 
@@ -77,6 +81,8 @@ class PotentialSpec(Strict):
         return 4.0 / self.distance**2
 
 
+# An edge accepts a JSON array or a Python list or tuple (the items stay strict).
+Edge = Annotated[tuple[NonNegativeInt, NonNegativeInt], pydantic.Strict(False)]
 GraphKind = Literal["complete", "ring", "path", "tree", "random_connected", "edges"]
 
 
@@ -103,7 +109,7 @@ class GraphSpec(Strict):
         description="Seed of a random graph (tree without branching, random_connected); "
         "null: the scenario seed.",
     )
-    edges: list[tuple[NonNegativeInt, NonNegativeInt]] | None = Field(
+    edges: list[Edge] | None = Field(
         default=None, description="edges only: undirected pairs (i, j), i != j, each once."
     )
 
@@ -192,13 +198,18 @@ class DoubleIntegratorParams(ModelParams):
         description="semi_implicit_euler: v += dt u(r, v); r += dt v (new v). rk4: classic "
         "fourth-order Runge-Kutta on (r, v), neighbour sets re-evaluated at every stage.",
     )
+    neighbour_search: Literal["auto", "grid", "all_pairs"] = Field(
+        default="auto",
+        description="Metric neighbours: the uniform grid, or every pair (O(N^2) but no grid "
+        f"rebuild, faster at small N). auto: all_pairs when N <= {ALL_PAIRS_AUTO}.",
+    )
     valency_per_agent_max: NonNegativeInt = Field(
         default=32,
         description="Report each agent's valency (Fig. 6 of paper 000) when N <= this; "
         "otherwise a histogram valency_hist_0..15 and valency_hist_16plus.",
     )
     lambda2_max_agents: NonNegativeInt = Field(
-        default=10_000,
+        default=2_000,
         description="Compute lambda_2 of the graph Laplacian (sparse shift-invert) only when "
         "N <= this; above it the observable lambda2 reports -1 (not computed).",
     )
@@ -208,6 +219,19 @@ class DoubleIntegratorParams(ModelParams):
             raise ValueError(
                 f"model {self.kind!r} runs on the unbounded plane (space.kind 'plane'), as in "
                 f"paper {paper}"
+            )
+
+    def uses_all_pairs(self, n: int) -> bool:
+        return self.neighbour_search == "all_pairs" or (
+            self.neighbour_search == "auto" and n <= ALL_PAIRS_AUTO
+        )
+
+    def _check_search(self, scenario: Scenario) -> None:
+        n = scenario.n_agents
+        if self.neighbour_search == "all_pairs" and n > ALL_PAIRS_MAX:
+            raise ValueError(
+                f"neighbour_search 'all_pairs' costs N^2 per step: allowed up to N = "
+                f"{ALL_PAIRS_MAX}, here N = {n}; use 'grid' or 'auto'"
             )
 
     def _check_dt(self, scenario: Scenario, max_valency: int | None) -> None:
@@ -273,6 +297,8 @@ class FlockingParams(DoubleIntegratorParams):
                     "topology 'fixed' takes its neighbours from model.graph; remove the "
                     "neighbours block (it would be ignored)"
                 )
+            if self.neighbour_search != "auto":
+                raise ValueError("neighbour_search applies to topology 'switching' only")
             self.graph.check(n)
             self._check_dt(scenario, self.graph.max_valency(n))
             return
@@ -284,6 +310,7 @@ class FlockingParams(DoubleIntegratorParams):
                 "(section 5: i ~ j iff |r_ij| < R)"
             )
         check_radius_exceeds_d(scenario.neighbours.radius, self.potential)
+        self._check_search(scenario)
         self._check_dt(scenario, None)
 
 

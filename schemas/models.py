@@ -8,8 +8,11 @@ from pydantic import Field
 
 from . import vicsek_presets  # noqa: F401  (registers the M1 presets)
 from .catalog import MODELS
+from .flocking import FlockingParams  # noqa: F401  (registers M2)
+from .flocking_presets import tjp_fixed  # noqa: F401  (registers the M2 and M3 presets)
 from .formation import FormationParams  # noqa: F401  (registers M4)
 from .formation_presets import sim1  # noqa: F401  (registers the M4 presets)
+from .obstacles import ObstacleFlockingParams  # noqa: F401  (registers M3)
 from .vicsek import VicsekParams
 
 # The discriminated union of model parameter blocks, in registration order.

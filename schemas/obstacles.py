@@ -15,11 +15,12 @@ delta the distance from r_i to the obstacle's boundary (a point: |r_i - r_o|; a 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, ClassVar, Literal
+from typing import TYPE_CHECKING, Annotated, ClassVar, Literal
 
+import pydantic
 from pydantic import Field, StrictBool
 
-from .base import NonNegativeReal, PositiveInt, PositiveReal, Real, Strict, Vec2
+from .base import NonNegativeReal, PositiveInt, PositiveReal, Strict, Vec2
 from .catalog import register_model
 from .flocking import DoubleIntegratorParams, PotentialSpec, check_radius_exceeds_d
 
@@ -27,6 +28,7 @@ if TYPE_CHECKING:
     from .scenario import Scenario
 
 MAX_OBSTACLES = 1_000_000
+Kappa = Annotated[float, Field(ge=1.0, le=100.0, allow_inf_nan=False), pydantic.Strict(True)]
 
 
 class DiscObstacle(Strict):
@@ -71,9 +73,8 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
         description="d of beta_io: an obstacle whose boundary is d or farther from the agent "
         "has beta_io = 1 (length).",
     )
-    kappa: Real = Field(
-        default=1.0, ge=1.0, le=100.0,
-        description="Navigation function tuning parameter kappa (>= 1).",
+    kappa: Kappa = Field(
+        default=1.0, description="Navigation function tuning parameter kappa, in [1, 100]."
     )
     c_d: NonNegativeReal = Field(default=0.5, description="Damping gain c_d (1/time).")
     V_min: PositiveReal = Field(
@@ -129,4 +130,5 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
         for k, disc in enumerate(self.discs):
             if math.hypot(dx - disc.center[0], dy - disc.center[1]) <= disc.radius:
                 raise ValueError(f"model.discs[{k}] covers the destination {self.destination}")
+        self._check_search(scenario)
         self._check_dt(scenario, None)

@@ -53,7 +53,7 @@ def _is_union_tag(part: str | int) -> bool:
     return isinstance(part, str) and (part in MODELS or part in _MEMBER_TAGS)
 
 
-_MEMBER_TAGS = {"periodic", "plane", "box", "disc", "random", "explicit"}
+_MEMBER_TAGS = {"periodic", "plane", "box", "disc", "lattice", "random", "explicit"}
 
 
 def json_safe(value: Any) -> Any:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from pydantic import Field, StrictInt, model_validator
 
 from .base import Strict
@@ -77,8 +79,10 @@ class Scenario(Strict):
         init = self.initial
         if isinstance(self.space, PeriodicBox) and not isinstance(init, ExplicitInitial):
             region = init.region
-            if region is not None and region.kind == "box":
-                lo, hi = region.low, region.high
+            if region is not None and region.kind in ("box", "lattice"):
+                lo = region.low
+                hi = region.high if region.kind == "box" else [
+                    c + region.spacing * math.ceil(math.sqrt(init.N)) for c in lo]
                 if min(lo) < 0 or max(hi) > self.space.L:
                     raise ValueError("initial.region must lie inside the periodic box [0, L]^2")
         if (

@@ -61,8 +61,10 @@ class ServerProcess:
     need a real server (and need to kill it)."""
 
     def __init__(self, data_dir: Path, *, env: dict[str, str] | None = None,
-                 port: int | None = None, log_path: Path | None = None):
+                 port: int | None = None, log_path: Path | None = None,
+                 log_level: str = "info"):
         self.data_dir = Path(data_dir)
+        self.log_level = log_level
         self.env = env or {}
         self.port = port or free_port()
         self.log_path = log_path or self.data_dir.with_name(self.data_dir.name + ".log")
@@ -77,7 +79,7 @@ class ServerProcess:
         import httpx
 
         cmd = [sys.executable, "-m", "service.serve", "--port", str(self.port),
-               "--data-dir", str(self.data_dir), "--log-level", "warning"]
+               "--data-dir", str(self.data_dir), "--log-level", self.log_level]
         with self.log_path.open("ab") as log:
             self.proc = subprocess.Popen(cmd, env={**os.environ, **self.env}, stdout=log,
                                          stderr=subprocess.STDOUT)

@@ -162,3 +162,22 @@ def test_every_model_runs_reproducibly_on_every_available_backend(taichi_cpu):
             for a, b in zip(*runs, strict=True):
                 for key in a:
                     assert np.array_equal(a[key], b[key]), (kind, backend, key)
+
+
+def test_jittered_lattice_start_keeps_agents_apart():
+    from scipy.spatial import cKDTree
+
+    from kernels.initial import initial_state
+
+    data = with_("initial", {"kind": "random", "N": 1600, "region": {
+        "kind": "lattice", "low": [1, 1], "spacing": 0.2, "jitter": 0.3}})
+    sc = Scenario.model_validate(data)
+    pos = initial_state(sc).positions
+    d, _ = cKDTree(pos).query(pos, k=2)
+    assert d[:, 1].min() >= 0.2 * (1 - 2 * 0.3) - 1e-12
+    assert pos.min() >= 1 - 0.3 * 0.2 and pos.max() <= 1 + 0.2 * 39.3
+    too_big = with_("initial", {"kind": "random", "N": 10_000, "region": {
+        "kind": "lattice", "spacing": 0.5}})
+    assert "inside the periodic box" in errors(too_big)["(root)"]
+    assert "jitter" in str(errors(with_("initial", {"kind": "random", "N": 4, "region": {
+        "kind": "lattice", "spacing": 0.5, "jitter": 0.5}})))

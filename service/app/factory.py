@@ -11,6 +11,7 @@ from typing import Any
 from fastapi import Depends, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
+from fastapi.responses import JSONResponse
 from pydantic.json_schema import models_json_schema
 from starlette.concurrency import run_in_threadpool
 
@@ -52,8 +53,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             await run_in_threadpool(runtime.close)
 
+    # With an API key, the API description needs it too and the browser UIs (which
+    # cannot send it) are off.
+    public_docs = settings.api_key is None
     app = FastAPI(title="flocklab", version=VERSION, description=DESCRIPTION,
-                  lifespan=lifespan, openapi_tags=[
+                  lifespan=lifespan, openapi_url="/openapi.json" if public_docs else None,
+                  docs_url="/docs" if public_docs else None,
+                  redoc_url="/redoc" if public_docs else None, openapi_tags=[
                       {"name": "jobs", "description": "Submit, follow and cancel jobs."},
                       {"name": "results", "description": "Metrics and trajectories."},
                       {"name": "catalog", "description": "Models and presets."},
@@ -72,6 +78,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (jobs, results, catalog):
         app.include_router(module.router, prefix="/v1", dependencies=auth)
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
+    if not public_docs:
+        @app.get("/openapi.json", include_in_schema=False, dependencies=auth)
+        def openapi_json() -> JSONResponse:
+            return JSONResponse(app.openapi())
     return app
 
 

@@ -16,9 +16,10 @@ from schemas import FieldError, Scenario
 COMPONENTS = {"position": 2, "velocity": 2, "heading": 1}
 # Bytes per stored value: the engine may keep float32, but the estimate stays conservative.
 BYTES_PER_VALUE = 8
-# Rough per-agent working set of the engine: state arrays double-buffered, the cell grid's
-# count/offset/sorted-index arrays and per-agent observables scratch.
-ENGINE_BYTES_PER_AGENT = 160
+# Per-agent working set of the engine: state arrays double-buffered, the cell grid's
+# count/offset/sorted-index arrays and per-agent observables scratch. Measured peak RSS
+# growth by `python -m bench.bench` at N = 10^6: 130-140 B (Vicsek) to 370 B (M2/M3).
+ENGINE_BYTES_PER_AGENT = 400
 # Fixed cost of a worker with Taichi loaded and kernels compiled.
 ENGINE_BASE_BYTES = 256 * 2**20
 

@@ -115,8 +115,11 @@ class Supervisor:
         self._stopping.set()
         self.wake()
         self._thread.join(timeout)
-        os.close(self._wake_r)
-        os.close(self._wake_w)
+        # Forget the descriptors before closing them: a late wake() must not write into
+        # whatever file reuses the number.
+        fds, self._wake_r, self._wake_w = (self._wake_r, self._wake_w), -1, -1
+        for fd in fds:
+            os.close(fd)
 
     def wake(self) -> None:
         """Ask the loop to look at the queue now (called after a submission)."""
@@ -263,6 +266,11 @@ class Supervisor:
             self._finish_stopped(a)
             return
         job = self.store.get(a.job_id)
+        if job is not None and job.cancel_requested:
+            # Cancelled before the supervisor could pass the request on: never re-run it.
+            self.store.finish(a.job_id, a.token, "cancelled", steps_done=a.steps_done)
+            self.on_change(a.job_id)
+            return
         note = problem("worker-lost", "Worker process lost", 500,
                        f"the worker running this job {_describe_exit(w.process.exitcode)} "
                        f"during attempt {job.attempts if job else '?'}",

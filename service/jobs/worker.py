@@ -17,6 +17,7 @@ service re-runs the job, and this orphan must not keep the CPU.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -57,7 +58,9 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
         token = order["token"]
 
         def on_progress(done: int, total: int, token: str = token) -> None:
-            conn.send(("progress", token, int(done), int(total)))
+            # A broken pipe means the supervisor is gone: should_stop ends the run.
+            with contextlib.suppress(OSError):
+                conn.send(("progress", token, int(done), int(total)))
 
         def should_stop() -> bool:
             return cancel_flag.value != 0 or orphaned()

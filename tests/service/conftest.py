@@ -3,6 +3,7 @@ SQLite stores and real spawned Taichi workers (no mocks)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 from collections.abc import Iterator
@@ -61,10 +62,8 @@ def _cleanup(s: ServerProcess) -> None:
     workers = s.children()
     s.stop()
     for pid in workers:  # only our own server's workers, by pid
-        try:
+        with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
 
 
 @pytest.fixture

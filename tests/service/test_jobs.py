@@ -187,6 +187,22 @@ def test_timeout_ends_as_timed_out(http):
     assert done["finished_at"] is not None
 
 
+def test_a_diverging_run_fails_with_its_step_and_cause_and_keeps_its_frames(http):
+    # v0 * dt = 1e300 on the plane: the swarm spans more than 2^30 radii after one step.
+    body = scenario(steps=50, every=1)
+    body["model"]["v0"] = 1e300
+    body["space"] = {"kind": "plane"}
+    body["initial"]["region"] = {"kind": "box", "low": [0, 0], "high": [5, 5]}
+    done = wait_for(http, submit(http, {"scenario": body})["id"])
+    assert done["status"] == "failed" and done["attempts"] == 1  # never retried
+    err = done["error"]
+    assert err["type"].endswith("diverged") and err["step"] <= 2
+    assert err["cause"] and err["quantity"] == "position"
+    assert done["results"] == "available"  # the frames before the blow-up are kept
+    m = http.get(f"/v1/jobs/{done['id']}/metrics").json()
+    assert m["summary"]["status"] == "diverged"
+
+
 def test_idempotency_key(http):
     body = {"scenario": scenario(steps=4)}
     key = {"Idempotency-Key": f"test-{uuid.uuid4()}"}
@@ -199,7 +215,7 @@ def test_idempotency_key(http):
     spelled = {"scenario": {**scenario(steps=4), "backend": "cpu"}}
     assert http.post("/v1/jobs", json=spelled, headers=key).json()["id"] == first.json()["id"]
     other = http.post("/v1/jobs", json={"scenario": scenario(steps=5)}, headers=key)
-    assert_problem(other, 409)["job_id"] == first.json()["id"]
+    assert assert_problem(other, 409)["job_id"] == first.json()["id"]
     listed = [j["id"] for j in http.get("/v1/jobs", params={"limit": 500}).json()["items"]]
     assert listed.count(first.json()["id"]) == 1
 

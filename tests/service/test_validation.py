@@ -54,7 +54,8 @@ def test_non_finite_numbers_are_422_not_500(http, token):
     # Also in a bare scenario and in preset overrides.
     raw = json.dumps(scenario()).replace('"dt": 1.0', f'"dt": {token}')
     assert_problem(_post_raw(http, raw), 422, "time.dt")
-    raw = '{"preset": "vicsek-1995", "overrides": {"space": {"L": %s}}}' % token
+    raw = json.dumps({"preset": "vicsek-1995", "overrides": {"space": {"L": 7}}})
+    raw = raw.replace("7", token)
     assert_problem(_post_raw(http, raw), 422, "overrides.space.L")
     assert _job_count(http) == before
 

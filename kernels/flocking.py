@@ -1,0 +1,332 @@
+"""M2 kernel: Tanner–Jadbabaie–Pappas flocking, fixed or switching topology (paper 000).
+
+State: positions r_i and velocities v_i (double integrator, eq. 1). Control (eq. 3):
+  u_i = - sum_{j in N_i} (v_i - v_j) - sum_{j in N_i} grad_{r_i} V_ij(|r_ij|)
+fixed     N_i from a CSR graph in agent-id order (no spatial search, no sorting).
+switching N_i = {j : |r_ij| < R} on the neighbour grid (kernels/flocking_grid.py; state
+          kept in grid order; at small N over all pairs instead), V saturated at R
+          (eq. 10): no force at R or beyond.
+One step: semi-implicit Euler (v' = v + dt u, r' = r + dt v') fused into one kernel, or
+RK4 (kernels/integrators.py) with the neighbour sets re-evaluated at every stage (stages
+2-4 on a grid built at the stage positions).
+Observables at observation steps only: velocity statistics, W (eq. 5) or Q (eq. 10),
+valencies, components, lambda_2, and the closest pair.
+
+`FlockingKernel` is also the base of M3 (kernels/obstacles.py), which adds per-agent radii,
+the navigation function, damping and the adaptive radius through the hooks marked below.
+"""
+
+from typing import Any
+
+import numpy as np
+import taichi as ti
+
+from schemas import Scenario
+
+from . import flocking_observe as fo
+from .flocking_forces import (
+    NO_DAMPING,
+    P_A,
+    P_C,
+    P_DT,
+    P_R2,
+    P_SIZE,
+    RADIUS_RULES,
+    csr_accel,
+    csr_euler,
+    csr_potential,
+    grid_kernels,
+    grid_observe_kernel,
+    root_labels,
+)
+from .flocking_grid import PlaneGrid
+from .flocking_navigation import NAV_SIZE, ObstacleGrid
+from .graph import count_roots, reset_parent
+from .grid import permute, permute_rows
+from .initial import InitialState, initial_state
+from .integrators import gather_rows, rk4_begin, rk4_finish, rk4_stage
+from .layout import SortedState
+from .model import ModelKernel, register_kernel
+from .result import SimulationDiverged
+from .topology import build_edges, to_csr
+
+DIVERGED_CAUSE = (
+    "dt too large for the pair potential's stiffness, or two agents (or an agent and an "
+    "obstacle) at the same point"
+)
+
+
+def _f64(*shape: int) -> ti.Ndarray:
+    return ti.ndarray(ti.f64, shape=shape)
+
+
+def _i32(*shape: int) -> ti.Ndarray:
+    return ti.ndarray(ti.i32, shape=shape)
+
+
+@register_kernel
+class FlockingKernel(ModelKernel):
+    kind = "flocking"
+
+    def __init__(self, scenario: Scenario):
+        super().__init__(scenario)
+        p = scenario.model
+        self.p = p
+        self.n = n = scenario.n_agents
+        self.dt = scenario.time.dt
+        self.a, self.c = p.potential.coefficients()
+        self.fixed = self._fixed_topology()
+        self.state = SortedState(self._initial_arrays(initial_state(scenario)))
+        self.prm = _f64(P_SIZE)
+        self.prm.from_numpy(self._parameters())
+        self.bad = _i32(1)
+        self.pot = _f64(n)
+        self.closest: dict[str, Any] = {}
+        if self.fixed:
+            self._init_graph(scenario)
+        else:
+            self._init_grid(scenario)
+        if p.integrator == "rk4":
+            self.rk4 = {k: _f64(n, 2) for k in ("xs", "vs", "a", "xk", "vk")}
+        else:
+            self.rk4 = None
+        self._sorted_for = -1
+
+    # --- hooks for M3 -------------------------------------------------------------------
+
+    def _fixed_topology(self) -> bool:
+        return self.p.topology == "fixed"
+
+    def _initial_arrays(self, init: InitialState) -> dict[str, np.ndarray]:
+        return {"pos": init.positions, "vel": init.velocities}
+
+    def _parameters(self) -> np.ndarray:
+        prm = np.zeros(P_SIZE)
+        prm[P_DT], prm[P_A], prm[P_C] = self.dt, self.a, self.c
+        if not self.fixed:
+            prm[P_R2] = self.scenario.neighbours.radius ** 2
+        return prm
+
+    def _grid_flags(self) -> dict[str, Any]:
+        """Compile-time choices of the grid kernels."""
+        return dict(rule=RADIUS_RULES["uniform"], inclusive=self.scenario.inclusive,
+                    mission=False, damping=NO_DAMPING, has_obstacles=False, unit_kappa=True)
+
+    def _init_navigation(self) -> None:
+        """No mission potential: empty obstacle grid and parameters (never read)."""
+        self.obstacles = ObstacleGrid(np.zeros((0, 2)), np.zeros(0), 1.0)
+        self.nav = _f64(NAV_SIZE)
+
+    def _before_motion(self, step: int) -> None:
+        """Runs after sorting, before the step's motion (M3: the adaptive radius)."""
+
+    def _q_constant(self) -> float:
+        """The constant part of Q, 1/2 sum_i sum_{j != i} V(R) (eq. 10)."""
+        r = self.scenario.neighbours.radius
+        return 0.5 * self.n * (self.n - 1) * self.p.potential.value(r)
+
+    # --- set-up -------------------------------------------------------------------------
+
+    def _init_graph(self, scenario: Scenario) -> None:
+        n = self.n
+        u, v = build_edges(self.p.graph, n, scenario.seed)
+        indptr, indices = to_csr(n, u, v)
+        self.indptr = ti.ndarray(ti.i32, shape=n + 1)
+        self.indptr.from_numpy(indptr)
+        self.indices = _i32(max(len(indices), 1))
+        if len(indices):
+            self.indices.from_numpy(indices)
+        adj = fo.graph_matrix(n, u, v)
+        n_comp = fo.components(adj)
+        self.graph_info = {
+            "edges": len(u),
+            "components": n_comp,
+            "lambda2": fo.algebraic_connectivity(adj, n_comp, self.p.lambda2_max_agents),
+        }
+        self.graph_obs = {
+            "components": float(n_comp),
+            "lambda2": self.graph_info["lambda2"],
+            **fo.valency_stats(np.diff(indptr), self.p.valency_per_agent_max),
+        }
+
+    def _init_grid(self, scenario: Scenario) -> None:
+        n = self.n
+        self._init_navigation()
+        self.flags = flags = self._grid_flags()
+        self.all_pairs = self.p.uses_all_pairs(n)
+        self.grid_radius = r = scenario.neighbours.radius
+        # All pairs: the grid is never built; its arrays only fill the kernels' signature.
+        self.grid = PlaneGrid(1 if self.all_pairs else n, r)
+        rk4_grid = self.p.integrator == "rk4" and not self.all_pairs
+        self.stage_grid = PlaneGrid(n, r) if rk4_grid else None
+        self.per_agent_radius = flags["rule"] != RADIUS_RULES["uniform"]
+        self._no_rad = _f64(1)
+        self.parent, self.labels = _i32(n), _i32(n)
+        self.deg, self.near_k = _i32(n), _i32(n)
+        self.near_d2 = _f64(n)
+        self.stage = None
+
+    # --- stepping -----------------------------------------------------------------------
+
+    def _rad(self) -> ti.Ndarray:
+        return self.state["rad"] if self.per_agent_radius else self._no_rad
+
+    def _search(self, grid: PlaneGrid) -> str:
+        """The visitor for positions bucketed in `grid` (all pairs: no grid)."""
+        return "all_pairs" if self.all_pairs else grid.layout
+
+    def _kernels(self, grid: PlaneGrid):
+        """(euler, accel) for the grid's current layout (compiled once per layout)."""
+        return grid_kernels(**self.flags, search=self._search(grid))
+
+    def _sort(self, step: int) -> None:
+        """Grid order for this step's positions (fixed graphs and all pairs need none)."""
+        if not (self.fixed or self.all_pairs) and self._sorted_for != step:
+            self.grid.build(self.state["pos"], step)
+            self.state.resort(self.grid)
+            self._sorted_for = step
+
+    def step(self, step: int) -> None:
+        self._sort(step)
+        if not self.fixed:
+            self._before_motion(step)
+        st = self.state
+        self.bad.fill(0)
+        pos_out, vel_out = st.scratch("pos"), st.scratch("vel")
+        if self.rk4 is not None:
+            self._rk4_step(step, pos_out, vel_out)
+        elif self.fixed:
+            csr_euler(st["pos"], st["vel"], pos_out, vel_out, self.indptr, self.indices,
+                      self.prm, self.bad)
+        else:
+            euler, _ = self._kernels(self.grid)
+            euler(st["pos"], st["vel"], self._rad(), pos_out, vel_out, self.prm, self.nav,
+                  self.bad, *self.grid.view(), *self.obstacles.view())
+        if self.bad.to_numpy()[0]:
+            raise SimulationDiverged(step, "position/velocity", DIVERGED_CAUSE)
+        st.swap("pos")
+        st.swap("vel")
+
+    def _rk4_step(self, step: int, pos_out: ti.Ndarray, vel_out: ti.Ndarray) -> None:
+        b, h = self.rk4, self.dt
+        x0, v0 = self.state["pos"], self.state["vel"]
+        rk4_begin(x0, v0, b["xs"], b["vs"], b["xk"], b["vk"])
+        self._accel(x0, v0, b["a"], step, at_state=True)
+        for w, c in ((1.0, h / 2), (2.0, h / 2), (2.0, h)):
+            rk4_stage(x0, v0, b["xs"], b["vs"], b["a"], b["xk"], b["vk"], w, c)
+            self._accel(b["xs"], b["vs"], b["a"], step, at_state=False)
+        rk4_finish(x0, v0, b["vs"], b["a"], b["xk"], b["vk"], pos_out, vel_out, h / 6,
+                   self.bad)
+
+    def _accel(self, pos: ti.Ndarray, vel: ti.Ndarray, out: ti.Ndarray, step: int,
+               at_state: bool) -> None:
+        """u(pos, vel) into out, all in storage order. at_state: pos is the sorted state,
+        whose grid is built; otherwise a stage grid is built at pos and undone after (all
+        pairs: no grid, pos is read as it is)."""
+        if self.fixed:
+            csr_accel(pos, vel, out, self.indptr, self.indices, self.prm, self.bad)
+            return
+        if at_state or self.all_pairs:
+            _, accel = self._kernels(self.grid)
+            accel(pos, vel, self._rad(), out, self.prm, self.nav, self.bad,
+                  *self.grid.view(), *self.obstacles.view())
+            return
+        if self.stage is None:
+            n = self.n
+            self.stage = {"pos": _f64(n, 2), "vel": _f64(n, 2), "a": _f64(n, 2),
+                          "rad": _f64(n) if self.per_agent_radius else self._no_rad}
+        s, g = self.stage, self.stage_grid
+        g.build(pos, step)
+        permute_rows(pos, s["pos"], g.perm)
+        permute_rows(vel, s["vel"], g.perm)
+        if self.per_agent_radius:
+            permute(self.state["rad"], s["rad"], g.perm)
+        _, accel = self._kernels(g)
+        accel(s["pos"], s["vel"], s["rad"], s["a"], self.prm, self.nav, self.bad,
+              *g.view(), *self.obstacles.view())
+        gather_rows(s["a"], out, g.perm)
+
+    # --- observables --------------------------------------------------------------------
+
+    def observe(self, step: int) -> dict[str, float]:
+        self._sort(step)
+        st = self.state
+        pos, vel = st["pos"].to_numpy(), st["vel"].to_numpy()
+        obs = fo.velocity_stats(vel)
+        kinetic = 0.5 * float((vel * vel).sum())
+        if self.fixed:
+            csr_potential(st["pos"], self.indptr, self.indices, self.prm, self.pot)
+            obs["W"] = 0.5 * float(self.pot.to_numpy().sum()) + kinetic  # eq. 5
+            obs.update(self.graph_obs)
+            self._closest(step, *fo.closest_pair(pos), obs)
+        else:
+            obs.update(self._observe_grid(pos, vel, step, kinetic))
+        return obs
+
+    def _observe_grid(self, pos: np.ndarray, vel: np.ndarray, step: int,
+                      kinetic: float) -> dict[str, float]:
+        st = self.state
+        ids = st.ids_numpy()
+        reset_parent(self.parent)
+        observe = grid_observe_kernel(self.flags["rule"], self.flags["inclusive"],
+                                      self._search(self.grid))
+        observe(st["pos"], self._rad(), self.prm, self.parent, self.deg, self.near_d2,
+                self.near_k, self.pot, *self.grid.view())
+        deg = np.empty(self.n, dtype=np.int64)
+        deg[ids] = self.deg.to_numpy()
+        n_comp = count_roots(self.parent)
+        reduced = 0.5 * float(self.pot.to_numpy().sum()) + kinetic
+        obs = {"Q_reduced": reduced, "Q": reduced + self._q_constant(),
+               "components": float(n_comp)}
+        obs.update(fo.valency_stats(deg, self.p.valency_per_agent_max))
+        # The 3x3 cells hold every pair closer than the grid radius: exact below it.
+        d2 = self.near_d2.to_numpy()
+        k = int(np.argmin(d2))
+        if self.all_pairs or d2[k] < self.grid_radius**2:
+            j = int(self.near_k.to_numpy()[k])
+            self._closest(step, float(np.sqrt(d2[k])), int(ids[k]), int(ids[j]), obs)
+        else:
+            dist, a, b = fo.closest_pair(pos)
+            self._closest(step, dist, int(ids[a]), int(ids[b]), obs)
+        lam = fo.NOT_COMPUTED
+        if self.n <= self.p.lambda2_max_agents:
+            radii = st["rad"].to_numpy() if self.per_agent_radius else self.grid_radius
+            rule = "own" if self.flags["rule"] == RADIUS_RULES["own"] else "min"
+            u, v = fo.proximity_edges(pos, radii, rule, self.flags["inclusive"])
+            lam = fo.algebraic_connectivity(fo.graph_matrix(self.n, u, v), n_comp,
+                                            self.p.lambda2_max_agents)
+        obs["lambda2"] = lam
+        return obs
+
+    def component_labels(self) -> np.ndarray:
+        """Connected-component label of each slot, from the last observation's union-find."""
+        root_labels(self.parent, self.labels)
+        return self.labels.to_numpy()
+
+    def _closest(self, step: int, dist: float, i: int, j: int, obs: dict[str, float]) -> None:
+        i, j = min(i, j), max(i, j)
+        obs.update({"min_distance": dist, "min_pair_i": float(i), "min_pair_j": float(j)})
+        if not self.closest or dist < self.closest["distance"]:
+            self.closest = {"distance": dist, "pair": [i, j], "time": step * self.dt}
+
+    def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
+        ids = self.state.ids_numpy()
+        out = {}
+        if "position" in arrays:
+            out["position"] = self.state.in_id_order("pos", ids)
+        if "velocity" in arrays or "heading" in arrays:
+            vel = self.state.in_id_order("vel", ids)
+            if "velocity" in arrays:
+                out["velocity"] = vel
+            if "heading" in arrays:
+                out["heading"] = np.arctan2(vel[:, 1], vel[:, 0])
+        return out
+
+    def convergence_keys(self) -> list[str]:
+        return ["velocity_disagreement"]
+
+    def extra(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"closest_approach": self.closest}
+        if self.fixed:
+            out["graph"] = self.graph_info
+        return out

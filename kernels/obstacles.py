@@ -1,0 +1,139 @@
+"""M3 kernel: Tanner's flocking among obstacles towards a destination (paper 002).
+
+Per step (after sorting the agents into the neighbour grid):
+  1. at steps k > 0 with k % radius_every == 0, the adaptive radius of eq. 4, synchronously:
+     R_i <- max(R_i / 2, floor) if |v_i| < stuck_speed and V_i > V_min,
+     R_i <- max(R_i, R_j for j in N_i) otherwise;
+  2. the control law of eq. 3,
+     u_i = - sum_{j in N_i} [(v_i - v_j) + grad_{r_i} U_ij] - grad_{r_i} V_i - c_d v_i [region],
+     N_i = {j : |r_ij| <= R_i}, U_ij saturated at R_i (kernels/flocking_forces.py), V_i the
+     navigation function over the obstacle grid (kernels/flocking_navigation.py);
+  3. the integrator (as M2).
+The agent grid is built with the initial radius R, which bounds every R_i (eq. 4 only halves
+or copies a neighbour's radius), so the 3x3 cells always hold N_i.
+"""
+
+from typing import Any
+
+import numpy as np
+
+from schemas import Scenario
+
+from . import flocking_observe as fo
+from .flocking import FlockingKernel, _f64, _i32
+from .flocking_forces import (
+    DAMPING,
+    P_CD,
+    P_FLOOR,
+    P_STUCK2,
+    P_VMIN,
+    RADIUS_RULES,
+    radius_kernel,
+)
+from .flocking_navigation import NAV_SIZE, ObstacleGrid, nav_eval_kernel, nav_parameters
+from .initial import InitialState
+from .model import register_kernel
+
+
+@register_kernel
+class ObstacleFlockingKernel(FlockingKernel):
+    kind = "flocking_obstacles"
+
+    def __init__(self, scenario: Scenario):
+        super().__init__(scenario)
+        p = self.p
+        self.nav_k = nav_eval_kernel(self.flags["has_obstacles"], self.flags["unit_kappa"])
+        self.mission = _f64(self.n, 4)  # (V_i, grad V_i, min boundary distance)
+        self.counts = _i32(2)
+        self.counts.fill(0)
+        self.adaptive = p.adaptive_radius
+
+    def _fixed_topology(self) -> bool:
+        return False
+
+    def _initial_arrays(self, init: InitialState) -> dict[str, np.ndarray]:
+        rad = np.full(self.n, self.scenario.neighbours.radius)
+        return {"pos": init.positions, "vel": init.velocities, "rad": rad}
+
+    def _parameters(self) -> np.ndarray:
+        prm = super()._parameters()
+        p = self.p
+        prm[P_CD], prm[P_VMIN] = p.c_d, p.V_min
+        prm[P_STUCK2], prm[P_FLOOR] = p.stuck_speed**2, p.radius_floor
+        return prm
+
+    def _grid_flags(self) -> dict[str, Any]:
+        p = self.p
+        return dict(rule=RADIUS_RULES[p.radius_rule], inclusive=self.scenario.inclusive,
+                    mission=True, damping=DAMPING[p.damping_region],
+                    has_obstacles=bool(p.obstacles or p.discs), unit_kappa=p.kappa == 1.0)
+
+    def _init_navigation(self) -> None:
+        p = self.p
+        centers = np.array([*p.obstacles, *(d.center for d in p.discs)],
+                           dtype=np.float64).reshape(-1, 2)
+        radii = np.array([0.0] * len(p.obstacles) + [d.radius for d in p.discs])
+        self.obstacles = ObstacleGrid(centers, radii, p.obstacle_range)
+        self.nav = _f64(NAV_SIZE)
+        self.nav.from_numpy(nav_parameters(p.destination, p.obstacle_range, p.kappa,
+                                           self.obstacles.bbox))
+
+    def _evaluate_mission(self) -> None:
+        """mission[i] = (V_i, grad V_i, min boundary distance) at the current positions."""
+        self.nav_k(self.state["pos"], self.mission, self.nav, *self.obstacles.view())
+
+    def _before_motion(self, step: int) -> None:
+        """Eq. 4 at its cadence, before the step's motion."""
+        if not self.adaptive or step == 0 or step % self.p.radius_every:
+            return
+        st = self.state
+        self._evaluate_mission()
+        update = radius_kernel(self.flags["rule"], self.flags["inclusive"],
+                               self._search(self.grid))
+        update(st["pos"], st["vel"], st["rad"], st.scratch("rad"), self.mission, self.prm,
+               self.counts, *self.grid.view())
+        st.swap("rad")
+
+    def _q_constant(self) -> float:
+        """1/2 sum_i sum_{j != i} V(R_ij), the saturated value of every U_ij (eq. 5):
+        R_ij = R_i (own), or min(R_i, R_j), where the k-th smallest radius is the smaller
+        one of its pairs with the N - 1 - k larger ones."""
+        rad = self.state["rad"].to_numpy()
+        v = self.a / rad**2 + np.log(rad**2) + self.c
+        if self.p.radius_rule == "own":
+            return 0.5 * (self.n - 1) * float(v.sum())
+        order = np.argsort(rad, kind="stable")
+        return float((v[order] * (self.n - 1 - np.arange(self.n))).sum())
+
+    def observe(self, step: int) -> dict[str, float]:
+        obs = super().observe(step)
+        st = self.state
+        self._evaluate_mission()
+        m = self.mission.to_numpy()
+        mission_sum = float(m[:, 0].sum())
+        obs["Q_reduced"] += mission_sum  # eq. 5: + sum_i V_i
+        obs["Q"] += mission_sum
+        pos, vel, rad = st["pos"].to_numpy(), st["vel"].to_numpy(), st["rad"].to_numpy()
+        dist = np.hypot(pos[:, 0] - self.p.destination[0], pos[:, 1] - self.p.destination[1])
+        cap = self.obstacles.cell
+        obs.update({
+            "destination_distance_mean": float(dist.mean()),
+            "destination_distance_max": float(dist.max()),
+            "inside_vmin_fraction": float(np.mean(m[:, 0] <= self.p.V_min)),
+            "mission_potential_max": float(m[:, 0].max()),
+            # Exact below the obstacle grid's cell; capped there (no obstacle closer).
+            "obstacle_distance_min": float(min(m[:, 3].min(), cap)),
+            "radius_min": float(rad.min()),
+            "radius_mean": float(rad.mean()),
+            "radius_max": float(rad.max()),
+            **fo.component_disagreement(vel, self.component_labels()),
+        })
+        return obs
+
+    def convergence_keys(self) -> list[str]:
+        return ["velocity_disagreement_components"]
+
+    def extra(self) -> dict[str, Any]:
+        halved, increased = (int(x) for x in self.counts.to_numpy())
+        return {**super().extra(),
+                "adaptive_radius": {"halvings": halved, "increases": increased}}
