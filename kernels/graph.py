@@ -120,6 +120,11 @@ class MetricGraph:
 
     def observe(self, grid: Grid, pos_sorted, ids_sorted) -> dict[str, float]:
         self.union_edges(grid, pos_sorted, ids_sorted)
+        return self.summary()
+
+    def summary(self) -> dict[str, float]:
+        """Components and degree statistics from `parent` and `deg` as last filled (by
+        `union_edges`, or by a model kernel that fuses the same work into its step)."""
         deg = self.deg.to_numpy()
         return {
             "components": float(count_roots(self.parent)),

@@ -20,7 +20,7 @@ import taichi as ti
 from schemas import PeriodicBox, Scenario, VicsekParams
 
 from . import rng
-from .graph import MetricGraph, count_roots, reset_parent
+from .graph import MetricGraph, count_roots, find, link, reset_parent
 from .grid import Grid, make_visitor, within
 from .initial import initial_state
 from .layout import SortedState
@@ -34,29 +34,40 @@ _R2, _V0DT, _ETA, _G, _L, _THETA0 = range(6)
 
 
 @cache
-def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool):
-    """Compile-time specialised step for one rule and geometry."""
+def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with_graph: bool):
+    """Compile-time specialised step for one rule and geometry. `with_graph` also fills the
+    graph observables of G(t) from the same neighbour visit: each agent's degree, and the
+    union of every edge into `parent` (slot-indexed) for the components."""
 
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):
-        ew, theta, prm = ti.static(S[0], S[1], S[2])
+        ew, theta, prm, parent = ti.static(S[0], S[1], S[2], S[3])
         # Branch-free accumulation: w is 1 for a neighbour, 0 otherwise.
         w = ti.cast(within(d.dot(d), prm[_R2], inclusive), ti.f64)
         if ti.static(rule == RULES["vicsek"]):
             acc += w * ti.math.vec3(ew[k, 0], ew[k, 1], 1.0)
         else:
             acc += w * ti.math.vec3(theta[k], 0.0, 1.0)
+        if ti.static(with_graph):
+            if w > 0.0 and k > i:
+                ri = find(parent, i)
+                rk = find(parent, k)
+                if ri != rk:
+                    link(parent, ri, rk)
         return acc
 
     visit = make_visitor(pair)
 
     @ti.kernel
     def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, ew_out: nd,
-             prm: nd, key: ti.u32, bad: nd, start: nd, cid: nd, gf: nd, gi: nd):
+             prm: nd, key: ti.u32, bad: nd, parent: nd, deg: nd,
+             start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
             xi = ti.math.vec2(pos[i, 0], pos[i, 1])
             acc = visit(i, xi, ti.math.vec3(0.0), pos, ti.static((start, cid, gf, gi)),
-                        ti.static((ew, theta, prm)), periodic)
+                        ti.static((ew, theta, prm, parent)), periodic)
+            if ti.static(with_graph):
+                deg[i] = ti.cast(acc[2], ti.i32) - 1  # the closed neighbourhood holds i
             th = theta[i]
             new = th
             if ti.static(rule == RULES["vicsek"]):
@@ -120,9 +131,10 @@ class VicsekKernel(ModelKernel):
         ]
         self.prm.from_numpy(prm)
         self.bad = ti.ndarray(ti.i32, shape=1)
-        self.kernel = step_kernel(
-            RULES[p.rule], scenario.inclusive, self.periodic, p.position_update == "new_heading"
-        )
+        variant = (RULES[p.rule], scenario.inclusive, self.periodic,
+                   p.position_update == "new_heading")
+        self.kernel = step_kernel(*variant, False)
+        self.kernel_with_graph = step_kernel(*variant, True)
         track = p.track_linked_intervals
         self.track = n <= 100_000 if track is None else track
         if self.track:
@@ -130,6 +142,7 @@ class VicsekKernel(ModelKernel):
             reset_parent(self.parent_u)
             self.linked = {"count": 0, "longest": 0, "open_since": 0}
         self._sorted_for = -1
+        self._advanced_for = -1  # the step whose next state observe() already computed
 
     def _sort(self, step: int) -> None:
         if self._sorted_for != step:
@@ -137,17 +150,28 @@ class VicsekKernel(ModelKernel):
             self.state.resort(self.grid)
             self._sorted_for = step
 
+    def _advance(self, step: int, with_graph: bool) -> None:
+        """Compute the state at step + 1 into the scratch buffers (and, with_graph, the
+        degrees and components of G(step) from the same visit)."""
+        st = self.state
+        self.bad.fill(0)
+        if with_graph:
+            reset_parent(self.graph.parent)
+        kernel = self.kernel_with_graph if with_graph else self.kernel
+        kernel(
+            st["pos"], st["theta"], st["ew"], st.ids, st.scratch("pos"), st.scratch("theta"),
+            st.scratch("ew"), self.prm, rng.step_key(self.scenario.seed, 0, step), self.bad,
+            self.graph.parent, self.graph.deg, *self.grid.view(),
+        )
+        self._advanced_for = step
+
     def step(self, step: int) -> None:
         self._sort(step)
         st = self.state
         if self.track:
             self._track_linked(step)
-        self.bad.fill(0)
-        self.kernel(
-            st["pos"], st["theta"], st["ew"], st.ids, st.scratch("pos"), st.scratch("theta"),
-            st.scratch("ew"), self.prm, rng.step_key(self.scenario.seed, 0, step), self.bad,
-            *self.grid.view(),
-        )
+        if self._advanced_for != step:
+            self._advance(step, with_graph=False)
         for name in ("pos", "theta", "ew"):
             st.swap(name)
         if self.bad.to_numpy()[0]:
@@ -171,15 +195,18 @@ class VicsekKernel(ModelKernel):
         self._sort(step)
         st = self.state
         theta = st["theta"].to_numpy()
-        e = st["ew"].to_numpy().sum(axis=0)  # sum of the unit vectors e(theta_i)
-        obs = {"polarization": float(np.hypot(e[0], e[1]) / self.n)}
+        e = st["ew"].to_numpy()  # unit vectors e(theta_i); column sums: 15x numpy's sum(0)
+        obs = {"polarization": float(np.hypot(e[:, 0].sum(), e[:, 1].sum()) / self.n)}
         if self.p.rule == "vicsek":
             obs["heading_spread"] = circular_spread(theta)
         else:
             obs["heading_spread"] = float(theta.max() - theta.min())
         if self.p.rule == "leader":
             obs["leader_error"] = float(np.abs(theta - self.p.leader_heading).max())
-        obs.update(self.graph.observe(self.grid, st["pos"], st.ids))
+        # The graph observables come from the step's own neighbour visit: observing then
+        # stepping costs one visit, not two (the last observation computes a step unused).
+        self._advance(step, with_graph=True)
+        obs.update(self.graph.summary())
         if self.track:
             obs["linked_intervals"] = float(self.linked["count"])
         return obs

@@ -165,3 +165,22 @@ def test_blow_up_is_reported_with_its_step(taichi_cpu):
     assert result.error["step"] <= 2
     assert "non-finite" in result.error["message"] or "spans" in result.error["message"]
     assert result.steps < 50
+
+
+@pytest.mark.parametrize("L", [6.0, None])
+def test_graph_observables_match_brute_force(taichi_cpu, L):
+    """Degrees and components of G(0), as fused into the step kernel, against numpy."""
+    from scipy.sparse.csgraph import connected_components
+
+    from tests.reference import adjacency
+
+    sc = scenario(N=150, L=L, r=0.4, steps=1, every=1, inclusive=False,
+                  region=None if L else {"kind": "box", "low": [0, 0], "high": [6, 6]})
+    result, sink = run_frames(sc)
+    a = adjacency(sink.pos[0], 0.4, L, inclusive=False)
+    deg = a.sum(axis=1)
+    obs = {k: v[0] for k, v in result.observables.items()}
+    assert obs["components"] == connected_components(a, directed=False)[0] > 1
+    assert obs["degree_mean"] == pytest.approx(deg.mean(), abs=1e-12)
+    assert (obs["degree_min"], obs["degree_max"]) == (deg.min(), deg.max())
+    assert obs["isolated"] == np.count_nonzero(deg == 0)
