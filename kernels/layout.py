@@ -41,6 +41,9 @@ class SortedState:
         """The spare buffer of `name`: a kernel may write the next state there, then `swap`."""
         return self._buf[name]
 
+    def scratch_all(self) -> dict[str, ti.Ndarray]:
+        return self._buf
+
     def swap(self, name: str) -> None:
         self.cur[name], self._buf[name] = self._buf[name], self.cur[name]
 
