@@ -19,21 +19,12 @@ import numpy as np
 import taichi as ti
 
 from . import runtime
-from .grid import MAX_CELLS_ACROSS, Grid
+from .grid import MAX_CELLS_ACROSS, Grid, bounding_box
 from .result import SimulationDiverged
 
 nd = ti.types.ndarray()
 CELLS_PER_AGENT = 4
 _WIDEN = 1.0 + 1e-9
-
-
-@ti.kernel
-def _bbox(pos: nd, out: nd):
-    for i in range(pos.shape[0]):
-        ti.atomic_min(out[0], pos[i, 0])
-        ti.atomic_min(out[1], pos[i, 1])
-        ti.atomic_max(out[2], pos[i, 0])
-        ti.atomic_max(out[3], pos[i, 1])
 
 
 @ti.func
@@ -91,7 +82,7 @@ class DenseGrid:
         """Bucket the agents at `pos`; False (nothing built) if the box needs more than
         CELLS_PER_AGENT cells per agent."""
         self._bb.from_numpy(np.array([np.inf, np.inf, -np.inf, -np.inf]))
-        _bbox(pos, self._bb)
+        bounding_box(pos, self._bb)
         x0, y0, x1, y1 = self._bb.to_numpy()
         extent = max(x1 - x0, y1 - y0)
         if not math.isfinite(extent):

@@ -65,7 +65,9 @@ def periodic_cell(x, y, gf: ti.template(), nc):
 
 
 @ti.kernel
-def _bbox(pos: nd, out: nd):
+def bounding_box(pos: nd, out: nd):
+    """out = (min x, min y, max x, max y) of an (N, 2) array; out must hold (inf, inf,
+    -inf, -inf) on entry. Exact and order-independent."""
     for i in range(pos.shape[0]):
         ti.atomic_min(out[0], pos[i, 0])
         ti.atomic_min(out[1], pos[i, 1])
@@ -204,7 +206,7 @@ class Grid:
         """Bucket the agents at `pos` ((N, 2), current storage order) and compute `perm`."""
         if not self.periodic:
             self._bb.from_numpy(np.array([np.inf, np.inf, -np.inf, -np.inf]))
-            _bbox(pos, self._bb)
+            bounding_box(pos, self._bb)
             bb = self._bb.to_numpy()
             extent = max(bb[2] - bb[0], bb[3] - bb[1])
             if not np.isfinite(extent):
