@@ -19,7 +19,7 @@ import numpy as np
 import taichi as ti
 
 from . import runtime
-from .grid import MAX_CELLS_ACROSS, Grid, bounding_box
+from .grid import MAX_CELLS_ACROSS, Grid, bbox_buffer, bounding_box
 from .result import SimulationDiverged
 
 nd = ti.types.ndarray()
@@ -76,14 +76,12 @@ class DenseGrid:
         self.start = ti.ndarray(ti.i32, shape=self.max_cells + 1)
         self.gf = ti.ndarray(ti.f64, shape=3)
         self.gi = ti.ndarray(ti.i32, shape=2)
-        self._bb = ti.ndarray(ti.f64, shape=4)
+        self._bb_part = bbox_buffer(n)
 
     def build(self, pos: ti.Ndarray, step: int) -> bool:
         """Bucket the agents at `pos`; False (nothing built) if the box needs more than
         CELLS_PER_AGENT cells per agent."""
-        self._bb.from_numpy(np.array([np.inf, np.inf, -np.inf, -np.inf]))
-        bounding_box(pos, self._bb)
-        x0, y0, x1, y1 = self._bb.to_numpy()
+        x0, y0, x1, y1 = bounding_box(pos, self._bb_part)
         extent = max(x1 - x0, y1 - y0)
         if not math.isfinite(extent):
             raise SimulationDiverged(step, "position", "a position became non-finite")
