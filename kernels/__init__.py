@@ -10,7 +10,7 @@ import os
 # user's output (the CLI prints its JSON summary there).
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
 
-from .engine import run
+from .engine import run, run_batch
 from .result import BackendUnavailable, FrameSink, RunResult, SimulationDiverged
 
-__all__ = ["BackendUnavailable", "FrameSink", "RunResult", "SimulationDiverged", "run"]
+__all__ = ["BackendUnavailable", "FrameSink", "RunResult", "SimulationDiverged", "run", "run_batch"]

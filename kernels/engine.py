@@ -8,7 +8,7 @@ cancellation comes from polling `should_stop` between steps.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -112,6 +112,33 @@ def run(
         extra={"setup_seconds": setup_seconds, **model.extra()},
         error=error,
     )
+
+
+ResultFn = Callable[[int, RunResult], None]
+
+
+def run_batch(
+    scenarios: Sequence[Scenario],
+    *,
+    on_result: ResultFn | None = None,
+    should_stop: StopFn | None = None,
+) -> list[RunResult]:
+    """Run many scenarios (a sweep's runs); results in input order.
+
+    Each result is bit-identical to `run(scenario)` alone: the engine path is chosen from
+    each scenario by itself, never from its companions. `on_result(index, result)` is
+    called as each run finishes. Once `should_stop()` is true, the runs in progress end
+    "cancelled" and the runs not yet started are left out of the returned list.
+    """
+    results: list[RunResult] = []
+    for i, sc in enumerate(scenarios):
+        if should_stop is not None and should_stop():
+            break
+        res = run(sc, should_stop=should_stop)
+        results.append(res)
+        if on_result is not None:
+            on_result(i, res)
+    return results
 
 
 def time_to_converge(t: np.ndarray, values: np.ndarray, tol: float) -> float | None:
