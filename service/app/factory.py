@@ -18,10 +18,11 @@ from starlette.concurrency import run_in_threadpool
 from schemas import Problem, Scenario
 from service.jobs import JobRuntime
 
+from .admission import AdmissionMiddleware
 from .auth import require_api_key
 from .body_limit import BodyLimitMiddleware
 from .events import ChangeHub
-from .problems import PROBLEM_MEDIA_TYPE, install_problem_handlers
+from .problems import PROBLEM_MEDIA_TYPE, UnexpectedErrorMiddleware, install_problem_handlers
 from .routers import catalog, health, jobs, results
 from .settings import Settings, load_settings
 from .wire import JobRequest
@@ -67,12 +68,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     install_problem_handlers(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
+    # Outside the body limit: refusals by content type, disk or queue read no body.
+    app.add_middleware(AdmissionMiddleware, settings=settings)
     if settings.cors_origins:  # off unless origins are listed (R20)
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins,
                            allow_methods=["GET", "POST"],
                            allow_headers=["Authorization", "X-API-Key", "Idempotency-Key",
                                           "Content-Type"],
                            expose_headers=["Location", "Retry-After", "Idempotent-Replayed"])
+    app.add_middleware(UnexpectedErrorMiddleware)  # outermost: catches every layer's error
     app.include_router(health.router)
     auth = [Depends(require_api_key)]
     for module in (jobs, results, catalog):

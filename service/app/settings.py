@@ -77,11 +77,30 @@ class Settings(BaseSettings):
         default=None, description="When set, every route but /healthz needs it.")
     cors_origins: list[str] = Field(default_factory=list,
                                     description="Allowed CORS origins (JSON list); none: off.")
+    # Hardening (docs/SERVICE_HARDENING.md).
+    min_free_disk_bytes: int = Field(
+        default=256 * MiB, ge=0, description="Free space the data disk keeps: below it, "
+        "submissions get 503 and queued jobs wait (0: no check).")
+    max_observable_rows: int = Field(
+        default=1_000_000, ge=1, description="Rows of a job's observables series "
+        "(steps / recording.observables_every) before 422.")
+    max_connections: int = Field(
+        default=1000, ge=1, description="Open connections before new ones get 503 (capped "
+        "below the open-file limit).")
+    header_timeout_seconds: float = Field(
+        default=10.0, gt=0, description="A request line and headers must arrive within this "
+        "(from the connection's start or its previous response), else 408 and close.")
+    body_timeout_seconds: float = Field(
+        default=60.0, gt=0, description="A request body must arrive within this after its "
+        "headers, else 408 and close.")
+    keep_alive_seconds: float = Field(
+        default=5.0, gt=0, description="An idle keep-alive connection is closed after this.")
 
     def limits(self) -> Limits:
         return Limits(max_agents=self.max_agents, max_steps=self.max_steps,
                       max_trajectory_bytes=self.max_trajectory_bytes,
-                      max_memory_bytes=self.max_memory_bytes)
+                      max_memory_bytes=self.max_memory_bytes,
+                      max_observable_rows=self.max_observable_rows)
 
     def supervisor_config(self) -> SupervisorConfig:
         threads = self.threads_per_worker or max(1, available_cpus() // self.workers)
@@ -96,6 +115,7 @@ class Settings(BaseSettings):
             worker_max_jobs=self.worker_max_jobs,
             worker_max_rss_bytes=self.worker_max_rss_bytes,
             warmup_preset=self.warmup_preset or None,
+            min_free_bytes=self.min_free_disk_bytes,
         )
 
 
