@@ -17,6 +17,7 @@ import pytest
 from service.serve import free_port
 
 from .svc_helpers import assert_problem, long_scenario, scenario, submit, wait_for
+from .test_durability import _wait_running
 
 
 @pytest.fixture
@@ -70,6 +71,7 @@ def test_sigterm_answers_long_polls_and_ends_streams_at_once(make_server):
     s = make_server()
     with httpx.Client(base_url=s.url, timeout=60) as http:
         running = submit(http, {"scenario": long_scenario()})
+        _wait_running(http, running["id"])
         waiting = submit(http, {"scenario": scenario()})  # queued behind it: no changes
         answers: dict[str, object] = {}
 
@@ -87,7 +89,7 @@ def test_sigterm_answers_long_polls_and_ends_streams_at_once(make_server):
         for t in threads:
             t.start()
         time.sleep(1.0)
-        assert http.get(f"/v1/jobs/{running['id']}").json()["status"] == "running"
+        assert http.get(f"/v1/jobs/{waiting['id']}").json()["status"] == "queued"
     started = time.monotonic()
     s.stop()
     stopped = time.monotonic() - started
