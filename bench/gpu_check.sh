@@ -113,6 +113,15 @@ def _ensure_on_target(requested, threads=None):
 
 
 runtime.ensure = _ensure_on_target
+
+
+def pytest_report_header(config):
+    return f"flocklab_gpu_plugin: runtime requests for 'cpu' run on {_TARGET!r}"
+
+
+def pytest_terminal_summary(terminalreporter):
+    ran = runtime._current.backend if runtime._current is not None else None
+    terminalreporter.write_line(f"flocklab_gpu_plugin: Taichi last ran on {ran!r}")
 EOF
 
 # Statistical agreement: `agree.py run BACKEND OUT` runs every family at small N over
@@ -278,7 +287,7 @@ else
     BENCH=(--backend "$BACKEND" --sizes 1000000 10000000)
 fi
 step "4. python -m bench.bench ${BENCH[*]}" 1800 \
-    bash -c "$PY -m bench.bench ${BENCH[*]} | tee '$WORK/bench.jsonl'"
+    bash -c "set -o pipefail; $PY -m bench.bench ${BENCH[*]} | tee '$WORK/bench.jsonl'"
 if [ "$DRY" = 0 ] && [ -s "$WORK/bench.jsonl" ]; then
     say ""
     "$PY" "$WORK/table.py" "$WORK/bench.jsonl" | tee -a "$LOG"
@@ -286,7 +295,7 @@ fi
 
 say ""
 if [ "${#FAILED[@]}" -eq 0 ]; then
-    say "gpu_check: every step passed ($([ "$DRY" = 1 ] && echo 'dry run: nothing ran'))"
+    say "gpu_check: every step passed$([ "$DRY" = 1 ] && echo ' (dry run: nothing ran)')"
     say "log: $LOG"
     exit 0
 fi
