@@ -63,13 +63,15 @@ def run_batch(
     arrays = [[a for a in s.recording.arrays if a in type(s.model).state_arrays]
               for s in scenarios]
 
-    def record(step: int, status: np.ndarray | None) -> None:
+    def record(step: int, status: np.ndarray | None, last: bool = False) -> None:
+        """Frames due at `step` (every k steps and at each replica's end; `last`: the
+        stopping step of a cancelled run, unless its frame is already there)."""
         for b, sink in enumerate(sinks):
             k = frame_every[b]
             if not k or not arrays[b] or step > steps[b]:
                 continue
-            if (step % k == 0 or step == steps[b]) and (
-                    status is None or batch.divergence(b, status) is None):
+            due = step == steps[b] or (step % k != 0 if last else step % k == 0)
+            if due and (status is None or batch.divergence(b, status) is None):
                 sink.frame(step, step * scenarios[b].time.dt, batch.frame(b, arrays[b]))
 
     record(0, None)
@@ -93,7 +95,8 @@ def run_batch(
             cancelled = True
             batch.end_at(s)
             batch.advance(s, s + 1)  # the final observation at the stopping step
-            record(s, batch.status()) if not any(frame_every) else None
+            if any(frame_every):
+                record(s, batch.status(), last=True)
             break
     status = batch.status()
     wall = time.perf_counter() - t0

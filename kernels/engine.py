@@ -111,7 +111,7 @@ def run(
         observables=obs,
         final=final,
         convergence=convergence,
-        extra={"setup_seconds": setup_seconds, **model.extra()},
+        extra={"setup_seconds": setup_seconds, "engine_path": "per_step", **model.extra()},
         error=error,
     )
 
