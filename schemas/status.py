@@ -30,11 +30,12 @@ class SweepStatus(BaseModel):
     name: str | None = Field(default=None, description="The sweep's `name`.")
     status: SweepState = Field(description="`succeeded` once every run ended, even when "
                                "some runs failed (see `runs_failed` and runs.csv).")
-    progress: float = Field(ge=0, le=1, description="Fraction of runs ended.")
-    runs_done: int = Field(description="Runs ended (succeeded or failed), finished runs of "
-                           "an interrupted attempt included.")
-    runs_failed: int = Field(description="Runs that ended without a result (diverged, "
-                             "engine error); their rows in runs.csv say why.")
+    progress: float = Field(ge=0, le=1, description="Fraction of runs ended (completed or "
+                            "failed).")
+    runs_done: int = Field(description="Runs completed, those of an interrupted attempt "
+                           "included (a retry does not redo them).")
+    runs_failed: int = Field(description="Runs that diverged (ended without measures); "
+                             "their rows in runs.csv say so.")
     runs_total: int = Field(description="Grid points x replicas.")
     model: str = Field(description="The base scenario's model kind.")
     created_at: dt.datetime

@@ -10,6 +10,7 @@ against the per-job limits.
 from __future__ import annotations
 
 import hashlib
+import json
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -18,6 +19,7 @@ from pydantic import BaseModel, ValidationError
 
 from schemas import FieldError, field_errors, parse_json_strict
 from schemas.sweep import Sweep, SweepError
+from schemas.sweep_presets import SWEEP_PRESETS
 from service.jobs.sweep_limits import SweepLimitError, check_sweep
 
 from .problems import ProblemError, invalid
@@ -49,9 +51,10 @@ def parse_sweep_submission(raw: bytes, settings: Settings) -> SweepSubmission:
     if not isinstance(data, dict):
         raise invalid([FieldError(loc="(root)", msg="the body must be a JSON object",
                                   type="object_type")])
-    if "sweep" in data:
+    if "sweep" in data or "sweep_preset" in data:
         request = _validate(SweepRequest, raw)
-        sweep, timeout = request.sweep, request.timeout_seconds
+        timeout = request.timeout_seconds
+        sweep = request.sweep or _from_preset(request.sweep_preset or "")
     else:
         sweep, timeout = _validate(Sweep, raw), None
     try:
@@ -79,6 +82,14 @@ def parse_sweep_submission(raw: bytes, settings: Settings) -> SweepSubmission:
         sweep=sweep, canonical=canonical, model_kind=runs[0].scenario.model.kind,
         max_agents=max(r.scenario.n_agents for r in runs), runs_total=len(runs),
         timeout_seconds=timeout, request_hash=digest)
+
+
+def _from_preset(name: str) -> Sweep:
+    if name not in SWEEP_PRESETS:
+        known = ", ".join(sorted(SWEEP_PRESETS))
+        raise invalid([FieldError(loc="sweep_preset", type="unknown_preset",
+                                  msg=f"unknown sweep preset {name!r}; known: {known}")])
+    return _validate(Sweep, json.dumps(SWEEP_PRESETS[name].build()).encode())
 
 
 def _validate(cls: type[M], raw: bytes) -> M:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from schemas import Problem
 from schemas.status import SweepStatus
@@ -32,15 +32,25 @@ EXAMPLE_SWEEP: dict[str, Any] = {
 
 
 class SweepRequest(BaseModel):
-    """A sweep submission with options; a bare sweep object is accepted as the body too."""
+    """A sweep submission with options: a sweep, or a named one (`flocklab sweep
+    preset:NAME`). A bare sweep object is accepted as the body too."""
 
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True, json_schema_extra={
-        "examples": [{"sweep": EXAMPLE_SWEEP, "timeout_seconds": 7200}]})
+        "examples": [{"sweep": EXAMPLE_SWEEP, "timeout_seconds": 7200},
+                     {"sweep_preset": "vicsek-1995-fig2a"}]})
 
-    sweep: Sweep = Field(description="The sweep to run.")
+    sweep: Sweep | None = Field(default=None, description="The sweep to run.")
+    sweep_preset: Annotated[str, Field(min_length=1, max_length=100)] | None = Field(
+        default=None, description="Name of a named sweep, e.g. 'vicsek-1995-fig2a'.")
     timeout_seconds: Annotated[float, Field(gt=0, le=1e9, allow_inf_nan=False)] | None = Field(
         default=None, description="Wall-clock limit for the whole sweep; default: the "
         "service's job timeout.")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> SweepRequest:
+        if (self.sweep is None) == (self.sweep_preset is None):
+            raise ValueError("give exactly one of 'sweep' and 'sweep_preset'")
+        return self
 
 
 def sweep_view(job: Job, ttl_seconds: float) -> SweepStatus:
@@ -53,11 +63,12 @@ def sweep_view(job: Job, ttl_seconds: float) -> SweepStatus:
         results = "expired"
     else:
         results = "none" if job.terminal else "pending"
-    done, total = job.steps_done, job.steps_total
+    ended, total = job.steps_done, job.steps_total
     return SweepStatus(
         id=job.id, name=_name(job), status=job.status,  # type: ignore[arg-type]
-        progress=min(1.0, done / total) if total else 0.0,
-        runs_done=done, runs_failed=job.runs_failed, runs_total=total, model=job.model_kind,
+        progress=min(1.0, ended / total) if total else 0.0,
+        runs_done=max(0, ended - job.runs_failed), runs_failed=job.runs_failed,
+        runs_total=total, model=job.model_kind,
         created_at=_ts(job.created_at), started_at=_ts(job.started_at),  # type: ignore[arg-type]
         finished_at=_ts(job.finished_at), attempts=job.attempts,
         cancel_requested=bool(job.cancel_requested), timeout_seconds=job.timeout_seconds,

@@ -62,8 +62,8 @@ CREATE INDEX IF NOT EXISTS jobs_by_status ON jobs (status, seq);
 # step), its rows reading as plain jobs. Added only when missing (SQLite has no
 # ADD COLUMN IF NOT EXISTS).
 #   kind         'job' (one scenario) or 'sweep' (a parameter sweep: `scenario` holds the
-#                canonical sweep, steps_done / steps_total count its runs)
-#   runs_failed  a sweep's runs that ended without a result so far (diverged, engine error)
+#                canonical sweep, steps_total its runs, steps_done the runs that ended)
+#   runs_failed  a sweep's runs that ended without measures so far (diverged)
 _ADDED_COLUMNS = {
     "kind": "TEXT NOT NULL DEFAULT 'job'",
     "runs_failed": "INTEGER NOT NULL DEFAULT 0",

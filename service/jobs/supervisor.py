@@ -67,7 +67,7 @@ class _Attempt:
     progress_saved: float = 0.0
     stop_reason: str | None = None  # "cancel" | "timeout"
     kill_at: float | None = None
-    kind: str = "job"  # "sweep": steps_done counts runs
+    kind: str = "job"  # "sweep": steps_done counts the runs that ended
     runs_failed: int | None = None
 
 
@@ -339,7 +339,7 @@ class Supervisor:
         summary = outcome["summary"]
         status, error = _job_status(summary, a)
         has_results = self.results.commit(a.job_id, a.token)
-        done = summary.get("runs_done" if a.kind == "sweep" else "steps", a.steps_done)
+        done = summary.get("runs_ended" if a.kind == "sweep" else "steps", a.steps_done)
         self.store.finish(a.job_id, a.token, status, error=error, backend=summary.get("backend"),
                           has_results=has_results, checksums=outcome.get("checksums"),
                           steps_done=done, runs_failed=summary.get("runs_failed"))

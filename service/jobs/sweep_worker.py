@@ -53,10 +53,11 @@ def run_sweep_order(order: dict[str, Any], conn: Connection,
         os.environ["FLOCKLAB_THREADS"] = str(order["threads"])
 
     def on_progress(p: Any) -> None:
-        # A broken pipe means the supervisor is gone: should_stop ends the sweep.
+        # A broken pipe means the supervisor is gone: should_stop ends the sweep. A
+        # sweep's steps_done counts the runs that ended, failed ones included.
         with contextlib.suppress(OSError):
-            conn.send(("progress", token, int(p.runs_done), int(p.runs_total),
-                       int(p.runs_failed)))
+            conn.send(("progress", token, int(p.runs_done + p.runs_failed),
+                       int(p.runs_total), int(p.runs_failed)))
 
     out_dir = Path(order["out_dir"])
     try:
@@ -64,10 +65,15 @@ def run_sweep_order(order: dict[str, Any], conn: Connection,
     except BackendUnavailable as exc:
         return {"problem": problem("backend-unavailable", "Backend unavailable", 503,
                                    str(exc))}
+    except SweepError as exc:  # e.g. a measure's observable the model does not have
+        return {"problem": problem("invalid-sweep", "Invalid sweep", 422, str(exc),
+                                   errors=[e.model_dump() for e in exc.errors])}
     except Exception as exc:  # a runner bug must fail this sweep, not the worker
         log.error("sweep %s failed:\n%s", order["job_id"], traceback.format_exc())
         return {"problem": problem("internal-error", "Internal error", 500,
                                    f"{type(exc).__name__}: {exc}")}
     summary = {"status": outcome.status, "runs_done": outcome.runs_done,
-               "runs_failed": outcome.runs_failed, "runs_total": outcome.runs_total}
+               "runs_failed": outcome.runs_failed, "runs_total": outcome.runs_total,
+               "runs_ended": outcome.runs_done + outcome.runs_failed,
+               "runs_resumed": outcome.runs_resumed}
     return {"summary": summary, "checksums": checksums(out_dir, SWEEP_FILES)}

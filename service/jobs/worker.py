@@ -6,7 +6,7 @@ forked after `ti.init` hangs, taichi#6725). It talks to the supervisor over a pi
     supervisor -> worker   ("run", order)  |  ("stop",)
     worker -> supervisor   ("ready", pid)
                            ("progress", token, steps_done, steps_total)
-                           ("progress", token, runs_done, runs_total, runs_failed)  (sweeps)
+                           ("progress", token, runs_ended, runs_total, runs_failed)  (sweeps)
                            ("result", token, {"summary", "checksums", "rss"}
                                            | {"problem", "rss"})
 

@@ -21,8 +21,8 @@ from starlette.concurrency import run_in_threadpool
 
 from schemas.status import SweepList, SweepStatus
 from service.jobs import IdempotencyConflict, Job, JobRuntime, NewJob, QueueFull
+from service.sweeps.tables import read_table
 
-from ..csv_tables import csv_as_json
 from ..deps import HubDep, RuntimeDep, SettingsDep, get_job
 from ..events import wait_for_change
 from ..problems import ProblemError
@@ -37,7 +37,6 @@ SweepId = Annotated[uuid.UUID, PathParam(description="The sweep's id (a UUID).",
                                          examples=["5d0c4a7e-2b1f-4f0e-9c1a-7e3d2b6a8f10"])]
 _ERRORS: dict[int | str, dict] = {401: {}, 404: {}, 409: {}, 410: {}, 422: {}}
 _CSV = "text/csv; charset=utf-8"
-_TABLES = {"table": "table.csv", "runs": "runs.csv", "series": "series.csv"}
 
 
 def _get(runtime: JobRuntime, sweep_id: uuid.UUID) -> Job:
@@ -195,7 +194,7 @@ Format = Annotated[Literal["csv", "json"] | None, Query(
 
 def _table_route(name: str, summary: str, description: str) -> None:
     """Register GET /{sweep_id}/<name>: one of the sweep's CSV files, as CSV or JSON."""
-    filename = _TABLES[name]
+    filename = f"{name}.csv"
 
     async def route(sweep_id: SweepId, runtime: RuntimeDep, request: Request,
                     format: Format = None) -> Response:
@@ -205,14 +204,16 @@ def _table_route(name: str, summary: str, description: str) -> None:
             raise ProblemError(404, "no-results", "No results",
                                f"the sweep ended ({job.status}) without a {filename}")
         if (format or _negotiate(request)) == "json":
-            body = await run_in_threadpool(csv_as_json, path)
+            body = await run_in_threadpool(read_table, folder, "json", name)
+            assert isinstance(body, dict)
             return JSONResponse({"sweep_id": job.id, **body})
         return FileResponse(path, media_type=_CSV, filename=f"{job.id}-{filename}")
 
     router.add_api_route(
         f"/{{sweep_id}}/{name}", route, methods=["GET"], summary=summary,
-        description=description + " JSON: `{\"sweep_id\", \"columns\": [...], \"rows\": "
-        "[[...], ...]}`, the CSV's cells as numbers or strings, NaN and empty cells as null.",
+        description=description + " JSON: `{\"sweep_id\", \"columns\": [...], \"data\": "
+        "[[...], ...]}`, numbers as numbers, axis values as in the sweep, empty cells (a "
+        "missing value) as null.",
         response_class=Response, response_model=None, tags=["sweeps"],
         responses={200: {"content": {"text/csv": {"schema": {"type": "string"}},
                                      "application/json": {"schema": {"type": "object"}}}},
