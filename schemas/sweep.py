@@ -363,8 +363,9 @@ class Sweep(Strict):
         try:
             scenario = Scenario.model_validate(doc)
         except ValidationError as exc:
-            return None, [FieldError(loc=f"runs[{first}].{e.loc}", type=e.type,
-                                     msg=f"{e.msg} ({runs} at {where})")
+            return None, [FieldError(loc=f"runs[{first}]" + ("" if e.loc == "(root)"
+                                                            else f".{e.loc}"),
+                                     type=e.type, msg=f"{e.msg} ({runs} at {where})")
                           for e in field_errors(exc)]
         problems = [
             FieldError(loc=f"measure.{name}.{field}", type="window_out_of_range",
