@@ -30,13 +30,22 @@ class SweepFailed(FlocklabError):
                          f"{status.runs_total} runs{why}")
 
 
-def submission(spec: Sweep | dict[str, Any], timeout_seconds: float | None) -> dict[str, Any]:
-    """The POST /v1/sweeps body: the bare sweep, or wrapped with a timeout."""
-    body = spec.model_dump(mode="json") if isinstance(spec, Sweep) else spec
-    if not isinstance(body, dict):
-        raise TypeError("a sweep is a schemas.sweep.Sweep or a dict")
+def submission(spec: Sweep | dict[str, Any] | None, sweep_preset: str | None,
+               timeout_seconds: float | None) -> dict[str, Any]:
+    """The POST /v1/sweeps body: the bare sweep, or wrapped (a named sweep, a timeout)."""
+    if (spec is None) == (sweep_preset is None):
+        raise ValueError("give exactly one of a sweep and sweep_preset=")
+    if sweep_preset is not None:
+        body: dict[str, Any] = {"sweep_preset": sweep_preset}
+    else:
+        sweep = spec.model_dump(mode="json") if isinstance(spec, Sweep) else spec
+        if not isinstance(sweep, dict):
+            raise TypeError("a sweep is a schemas.sweep.Sweep or a dict")
+        if timeout_seconds is None:
+            return sweep
+        body = {"sweep": sweep}
     if timeout_seconds is not None:
-        return {"sweep": body, "timeout_seconds": timeout_seconds}
+        body["timeout_seconds"] = timeout_seconds
     return body
 
 

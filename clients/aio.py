@@ -88,10 +88,10 @@ class AsyncClient:
                 return
             params["cursor"] = page["next_cursor"]
 
-    async def sweep(self, spec: Sweep | dict[str, Any], *,
-                    timeout_seconds: float | None = None, idempotency_key: str | None = None
-                    ) -> AsyncSweepJob:
-        body = _sweeps.submission(spec, timeout_seconds)
+    async def sweep(self, spec: Sweep | dict[str, Any] | None = None, *,
+                    sweep_preset: str | None = None, timeout_seconds: float | None = None,
+                    idempotency_key: str | None = None) -> AsyncSweepJob:
+        body = _sweeps.submission(spec, sweep_preset, timeout_seconds)
         hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
         r = await self.request("POST", "/v1/sweeps", json=body, headers=hdrs)
         return AsyncSweepJob(self, SweepStatus.model_validate(r.json()))

@@ -97,13 +97,15 @@ class Client:
 
     # -- sweeps ---------------------------------------------------------------------------
 
-    def sweep(self, spec: Sweep | dict[str, Any], *, timeout_seconds: float | None = None,
+    def sweep(self, spec: Sweep | dict[str, Any] | None = None, *,
+              sweep_preset: str | None = None, timeout_seconds: float | None = None,
               idempotency_key: str | None = None) -> SweepJob:
-        """Submit a sweep (a `schemas.sweep.Sweep` or a dict); returns its handle.
+        """Submit a sweep (a `schemas.sweep.Sweep` or a dict) or a named sweep
+        (`sweep_preset="vicsek-1995-fig2a"`); returns its handle.
 
         >>> table = c.sweep(spec).wait()      # numpy structured array, a row per grid point
         """
-        body = _sweeps.submission(spec, timeout_seconds)
+        body = _sweeps.submission(spec, sweep_preset, timeout_seconds)
         hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
         r = self.request("POST", "/v1/sweeps", json=body, headers=hdrs)
         return SweepJob(self, SweepStatus.model_validate(r.json()))

@@ -276,3 +276,26 @@ def test_openapi_describes_the_sweep_body(http: httpx.Client):
     body = doc["paths"]["/v1/sweeps"]["post"]["requestBody"]["content"]["application/json"]
     assert {"$ref": "#/components/schemas/Sweep"} in body["schema"]["oneOf"]
     assert "/v1/sweeps/{sweep_id}/table" in doc["paths"]
+
+
+def test_service_killed_mid_sweep_resumes_after_restart(make_server, tmp_path: Path):
+    data = tmp_path / "data"
+    s1 = make_server(env=SWEEP_ENV, data_dir=data)
+    with httpx.Client(base_url=s1.url, timeout=30) as http:
+        created = submit(http, sweep_spec(etas=(0.5, 3.0), replicas=3, n=200, steps=300,
+                                          name="restart"))
+        before = wait_sweep(http, created["id"], until=lambda s: s["runs_done"] >= 2)
+    killed_at = time.time()
+    s1.kill()  # kill -9 the API; its orphaned worker stops by itself
+
+    s2 = make_server(env=SWEEP_ENV, data_dir=data)
+    with httpx.Client(base_url=s2.url, timeout=30) as http:
+        done = wait_sweep(http, created["id"], timeout=180)
+        assert done["status"] == "succeeded" and done["attempts"] == 2
+        assert done["runs_done"] == 6
+        assert [s["id"] for s in http.get("/v1/sweeps").json()["items"]] == [created["id"]]
+    folder = data / "results" / created["id"]
+    early = [i for i in range(6)
+             if (folder / "runs" / str(i) / "summary.json").stat().st_mtime < killed_at]
+    assert len(early) >= before["runs_done"]
+    assert not list((data / "results" / ".attempts").iterdir())
