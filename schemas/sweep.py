@@ -304,14 +304,7 @@ class Sweep(Strict):
     def _expanded(self) -> list[SweepRun]:
         base = self.base_scenario
         doc = base.model_dump(mode="json")
-        errors: list[FieldError] = []
-        for loc, a in self._entry_locs():
-            if a.path == REPLICAS_PATH:
-                continue
-            try:
-                check_path(doc, a.path)
-            except PathError as exc:
-                errors.append(FieldError(loc=f"{loc}.path", msg=str(exc), type="unknown_path"))
+        errors = unknown_paths(doc, self.model_dump(mode="json")["axes"])
         if errors:
             raise SweepError(errors)
         runs: list[SweepRun] = []
@@ -344,15 +337,6 @@ class Sweep(Strict):
             raise SweepError(errors)
         return runs
 
-    def _entry_locs(self) -> list[tuple[str, AxisValues]]:
-        out = []
-        for i, a in enumerate(self.axes):
-            if isinstance(a, ZipAxis):
-                out += [(f"axes.{i}.zip.{j}", m) for j, m in enumerate(a.zip)]
-            else:
-                out.append((f"axes.{i}", a))
-        return out
-
     def _point_scenario(self, doc: dict[str, Any], values: dict[str, Any], first: int,
                         n_rep: int) -> tuple[Scenario | None, list[FieldError]]:
         """The scenario of one grid point, or None and its problems."""
@@ -378,6 +362,38 @@ class Sweep(Strict):
         return (None if problems else scenario), problems
 
 
+def unknown_paths(doc: dict[str, Any], axes: Any) -> list[FieldError]:
+    """An error for each axis path (in raw JSON `axes`) that names no field of `doc`, the
+    base scenario with its defaults filled in."""
+    errors = []
+    for i, axis in enumerate(axes if isinstance(axes, list) else []):
+        zipped = isinstance(axis, dict) and isinstance(axis.get("zip"), list)
+        members = [(f"axes.{i}.zip.{j}", m) for j, m in enumerate(axis["zip"])] if zipped \
+            else [(f"axes.{i}", axis)]
+        for loc, m in members:
+            path = m.get("path") if isinstance(m, dict) else None
+            if not isinstance(path, str) or path in (REPLICAS_PATH, "seed"):
+                continue
+            try:
+                check_path(doc, path)
+            except PathError as exc:
+                errors.append(FieldError(loc=f"{loc}.path", msg=str(exc), type="unknown_path"))
+    return errors
+
+
+def _raw_base(data: dict[str, Any]) -> dict[str, Any] | None:
+    """The base scenario of a raw sweep document, when it is valid (else None)."""
+    try:
+        if isinstance(data.get("base"), dict):
+            return Scenario.model_validate(data["base"]).model_dump(mode="json")
+        if data.get("preset") in PRESETS:
+            merged = merge(PRESETS[data["preset"]].build(), data.get("overrides") or {})
+            return Scenario.model_validate(merged).model_dump(mode="json")
+    except (ValidationError, AttributeError, TypeError):
+        pass
+    return None
+
+
 def sweep_problems(data: Any) -> list[FieldError]:
     """Every problem of a sweep document (empty: it is valid and every run validates)."""
     try:
@@ -396,6 +412,11 @@ def load_sweep(data: Any) -> Sweep:
         errors = field_errors(exc)
         for e in errors:  # 'axes.1.path-axis.values' -> 'axes.1.values'
             e.loc = ".".join(p for p in e.loc.split(".") if p not in _AXIS_TAGS)
+        # Unknown paths too, when the base is valid: every problem in one report.
+        base = _raw_base(data) if isinstance(data, dict) else None
+        if base is not None:
+            seen = {e.loc for e in errors}
+            errors += [e for e in unknown_paths(base, data.get("axes")) if e.loc not in seen]
         raise SweepError(errors) from None
     sweep.expand()
     return sweep

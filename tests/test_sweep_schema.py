@@ -120,6 +120,10 @@ def test_invalid_value_names_the_run_and_the_field():
 
 def test_structural_errors():
     assert locs(sweep(axes=[{"path": "model.eta", "values": []}])) == ["axes.0.values"]
+    # Reported together with an unknown path elsewhere in the file.
+    assert sorted(locs(sweep(axes=[{"path": "model.eta", "values": []},
+                                   {"zip": [{"path": "model.v00", "values": [1]}]}],
+                             replicas=0))) == ["axes.0.values", "axes.1.zip.0.path", "replicas"]
     unequal = sweep(axes=[{"zip": [{"path": "initial.N", "values": [1, 2]},
                                    {"path": "space.L", "values": [5.0]}]}])
     errors = sweep_problems(unequal)
