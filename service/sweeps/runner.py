@@ -5,7 +5,7 @@ The folder:
                       (index, grid point, replica, seed, axis values)
   runs.jsonl          the journal: one line per finished run (see journal.py)
   runs.csv, table.csv, series.csv   the tables (see tables.py), rewritten atomically
-                      every TABLE_INTERVAL seconds and at the end (also on cancel)
+                      every TABLE_INTERVAL s or more and at the end (also on cancel)
   runs/<index>/summary.json         keep = summaries (the default) or all
   runs/<index>/{scenario.json, observables.csv, trajectory.h5}   keep = all
 Running the same sweep into the same folder again resumes it: runs found in the journal
@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from kernels import RunResult
 
 BATCH_RUNS = 64  # runs handed to the engine at once (the batch it may fuse)
-TABLE_INTERVAL = 10.0  # seconds between table rewrites while a sweep runs
+TABLE_INTERVAL = 10.0  # least seconds between table rewrites while a sweep runs
 
 
 @dataclass(frozen=True)
@@ -109,7 +109,7 @@ def run_sweep(
             _run_batched(pending, state, journal, stop, should_stop)
     finally:
         journal.close()
-        write_tables(out_dir, sweep, runs, records)
+        state.write_tables()
     done, failed = state.counts()
     status = "completed" if len(records) == len(runs) else "cancelled"
     return SweepOutcome(status, done, failed, len(runs), out_dir, resumed)
@@ -125,6 +125,7 @@ class _State:
         self.records = records
         self.on_progress = on_progress
         self.last_tables = time.monotonic()
+        self.table_interval = TABLE_INTERVAL
 
     def counts(self) -> tuple[int, int]:
         failed = sum(1 for r in self.records.values() if r["status"] != "completed")
@@ -136,10 +137,9 @@ class _State:
             self.on_progress(SweepProgress(done, failed, len(self.runs)))
 
     def finish(self, run: SweepRun, result: RunResult, journal: Journal) -> None:
-        """Record one finished run (journal first: it is the resume state)."""
+        """Record one finished run. The journal line goes last: it is the resume state,
+        so a run whose line is missing is redone (and its summary rewritten)."""
         record = _record(self.sweep, run, result)
-        journal.append(record)
-        self.records[run.index] = record
         if self.sweep.keep == "summaries":
             summary = run_summary(run.scenario, result, frames=0, files=["summary.json"])
             summary["sweep_run"] = {"run": run.index, "point": run.point,
@@ -148,11 +148,20 @@ class _State:
             folder = self.out_dir / "runs" / str(run.index)
             folder.mkdir(parents=True, exist_ok=True)
             atomic_write(folder / "summary.json",
-                         json.dumps(summary, indent=2, allow_nan=False))
+                         json.dumps(summary, indent=2, allow_nan=False), durable=False)
+        journal.append(record)
+        self.records[run.index] = record
         self.progress()
-        if time.monotonic() - self.last_tables >= TABLE_INTERVAL:
-            write_tables(self.out_dir, self.sweep, self.runs, self.records)
-            self.last_tables = time.monotonic()
+        if time.monotonic() - self.last_tables >= self.table_interval:
+            self.write_tables()
+
+    def write_tables(self) -> None:
+        """Rewrite the tables; the next periodic rewrite waits at least 10 times as long
+        as this one took, so a sweep with long series does not spend its time in CSV."""
+        t0 = time.monotonic()
+        write_tables(self.out_dir, self.sweep, self.runs, self.records)
+        self.last_tables = time.monotonic()
+        self.table_interval = max(TABLE_INTERVAL, 10 * (self.last_tables - t0))
 
 
 def _run_batched(pending: list[SweepRun], state: _State, journal: Journal,
