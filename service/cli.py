@@ -66,7 +66,10 @@ def _scenario_data(source: str) -> Any:
         if name not in PRESETS:
             raise BadInput(f"unknown preset {name!r}; known: {', '.join(sorted(PRESETS))}")
         return PRESETS[name].build()
-    return read_json(source)
+    data = read_json(source)
+    if is_sweep_document(data):
+        raise BadInput(f"{source} is a sweep: run it with `flocklab sweep {source} --out DIR`")
+    return data
 
 
 def _validated(source: str, data: Any) -> Scenario:
