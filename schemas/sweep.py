@@ -225,6 +225,8 @@ class Sweep(Strict):
                 if p == q or p.startswith(q + ".") or q.startswith(p + "."):
                     raise ValueError(f"axes: the paths {q!r} and {p!r} overlap (each field "
                                      "may be swept by one axis only)")
+        if self._replicas_axis() and "replicas" in self.model_fields_set:
+            raise ValueError("give 'replicas' either as a field or as an axis, not both")
         for a in self._entries():
             if a.path == REPLICAS_PATH:
                 bad = [v for v in a.values if not (type(v) is int and 1 <= v <= MAX_RUNS)]
@@ -266,17 +268,21 @@ class Sweep(Strict):
         lengths = [(a.length if isinstance(a, ZipAxis) else len(a.values)) for a in self.axes]
         return math.prod(lengths)
 
+    def _replicas_axis(self) -> bool:
+        return any(a.path == REPLICAS_PATH for a in self._entries())
+
     def _replica_counts(self) -> list[int]:
-        rep = next((a for a in self._entries() if a.path == REPLICAS_PATH), None)
-        if rep is None:
+        """Replicas per grid point (one entry for all when no axis sets them)."""
+        if not self._replicas_axis():
             return [self.replicas]
         return [p[REPLICAS_PATH] for p in self._grid()]
 
     @property
     def n_runs(self) -> int:
         """Runs in all (grid points times their replicas)."""
-        counts = self._replica_counts()
-        return self.replicas * self.n_points if len(counts) == 1 else sum(counts)
+        if not self._replicas_axis():
+            return self.replicas * self.n_points
+        return sum(self._replica_counts())
 
     @property
     def total_agent_steps(self) -> int:

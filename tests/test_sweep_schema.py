@@ -68,6 +68,10 @@ def test_replicas_per_grid_point_through_a_zip():
     assert s.n_runs == 4 and [(r.point, r.replica, r.seed) for r in runs] == [
         (0, 0, 11), (0, 1, 12), (0, 2, 13), (1, 0, 11)]
     assert "replicas" not in runs[0].values  # not a scenario field, not a column
+    one = load_sweep(sweep(axes=[{"zip": [{"path": "initial.N", "values": [100]},
+                                          {"path": "replicas", "values": [3]}]}]))
+    assert one.n_runs == len(one.expand()) == 3
+    assert locs(sweep(replicas=2, axes=[{"path": "replicas", "values": [3]}])) == ["(root)"]
     assert "axes" in " ".join(
         e.msg for e in sweep_problems(sweep(axes=[{"path": "replicas", "values": [0]}])))
 
