@@ -213,6 +213,17 @@ def test_limits_and_bad_input_are_problems(http: httpx.Client):
     assert_problem(http.get("/v1/sweeps/00000000-0000-4000-8000-000000000000"), 404)
 
 
+def test_an_observable_the_model_lacks_fails_the_sweep_before_its_runs(http: httpx.Client):
+    spec = sweep_spec(etas=(1.0,), replicas=1, name="no-such-observable")
+    spec["measure"]["va"]["observable"] = "vorticity"
+    created = submit(http, spec)  # only the engine knows a model's observables
+    done = wait_sweep(http, created["id"])
+    assert done["status"] == "failed" and done["results"] == "none"
+    assert done["error"]["type"].endswith("invalid-sweep")
+    assert [e["loc"] for e in done["error"]["errors"]] == ["measure.va.observable"]
+    assert done["attempts"] == 1  # bad input is never retried
+
+
 def test_idempotency_key(http: httpx.Client):
     spec = sweep_spec(etas=(1.5,), replicas=1, name="idem")
     key = {"Idempotency-Key": f"sweep-{time.time_ns()}"}
