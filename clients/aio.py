@@ -232,6 +232,10 @@ class AsyncSweepJob:
             raise _sweeps.SweepFailed(self.state)
         return await self.table()
 
+    async def spec(self) -> Sweep:
+        r = await self.client.request("GET", f"/v1/sweeps/{self.id}/spec")
+        return Sweep.model_validate_json(r.content)
+
     async def cancel(self) -> SweepStatus:
         r = await self.client.request("POST", f"/v1/sweeps/{self.id}/cancel")
         self.state = SweepStatus.model_validate(r.json())

@@ -265,6 +265,11 @@ class SweepJob:
             raise _sweeps.SweepFailed(self.state)
         return self.table()
 
+    def spec(self) -> Sweep:
+        """The sweep as the service stores it (every default filled in)."""
+        return Sweep.model_validate_json(self.client.request(
+            "GET", f"/v1/sweeps/{self.id}/spec").content)
+
     def cancel(self) -> SweepStatus:
         """Stop the sweep; the runs it finished stay available (`table()`)."""
         r = self.client.request("POST", f"/v1/sweeps/{self.id}/cancel")

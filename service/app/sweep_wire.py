@@ -55,7 +55,8 @@ class SweepRequest(BaseModel):
 
 def sweep_view(job: Job, ttl_seconds: float) -> SweepStatus:
     base = f"/v1/sweeps/{job.id}"
-    links = {"self": base, "events": f"{base}/events", "cancel": f"{base}/cancel"}
+    links = {"self": base, "spec": f"{base}/spec", "events": f"{base}/events",
+             "cancel": f"{base}/cancel"}
     if job.has_results and not job.results_expired:
         results = "available"
         links |= {"table": f"{base}/table", "runs": f"{base}/runs", "series": f"{base}/series"}

@@ -75,6 +75,7 @@ def test_sync_sweep_wait_returns_the_table(server):
 
         assert handle.id in [s.id for s in c.sweeps(status="succeeded")]
         assert c.get_sweep(handle.id).state.runs_done == 6
+        assert handle.spec() == Sweep.model_validate_json(json.dumps(spec()))
         with pytest.raises(Conflict):
             handle.cancel()
 

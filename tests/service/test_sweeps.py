@@ -102,6 +102,8 @@ def test_sweep_table_equals_the_local_runners(http: httpx.Client, tmp_path: Path
         r = http.get(f"{base}/{name}", params={"format": "csv"})
         assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
         assert r.content == (local / f"{name}.csv").read_bytes(), name
+    stored = http.get(f"{base}/spec").json()
+    assert stored == Sweep.model_validate_json(json.dumps(spec)).model_dump(mode="json")
     as_json = http.get(f"{base}/table", headers={"Accept": "application/json"}).json()
     assert as_json["sweep_id"] == created["id"]
     assert {k: as_json[k] for k in ("columns", "data")} == read_table(local, "json")

@@ -138,6 +138,15 @@ async def get_sweep(
     return sweep_view(job, settings.result_ttl_seconds)
 
 
+@router.get("/{sweep_id}/spec", summary="The sweep as stored",
+            description="The canonical sweep (every default filled in) that runs; submitting "
+            "it again describes the same runs.",
+            responses={200: {"content": {"application/json": {"schema": {
+                "$ref": "#/components/schemas/Sweep"}}}}, 401: {}, 404: {}, 422: {}})
+def spec(sweep_id: SweepId, runtime: RuntimeDep) -> Response:
+    return Response(_get(runtime, sweep_id).scenario, media_type="application/json")
+
+
 @router.post("/{sweep_id}/cancel", status_code=202, response_model=SweepStatus,
              summary="Cancel a sweep",
              description="A queued sweep is cancelled at once; a running one stops after "
