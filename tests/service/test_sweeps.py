@@ -171,6 +171,9 @@ def test_limits_and_bad_input_are_problems(http: httpx.Client):
     assert body["type"].endswith("limit-exceeded")
     assert (body["runs"], body["max_runs"]) == (14, 12)
 
+    named = http.post("/v1/sweeps", json={"sweep_preset": "vicsek-1995-fig2a"})
+    assert assert_problem(named, 422, "axes")["runs"] == 140  # the named sweep, expanded
+
     heavy = sweep_spec(n=1000, steps=600)  # 4 runs x 1000 x 600 = 2.4e6 agent-steps
     body = assert_problem(http.post("/v1/sweeps", json=heavy), 422, "axes")
     assert (body["agent_steps"], body["max_agent_steps"]) == (2_400_000, 1_000_000)
