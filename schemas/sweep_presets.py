@@ -61,10 +61,13 @@ def _vicsek_1995_base(n: int, L: float, eta: float, steps: int) -> dict[str, Any
     }
 
 
-_MEASURES = {
-    "va": {"observable": "polarization", "reduce": "mean", "from_step": WARM_UP},
-    "va_std": {"observable": "polarization", "reduce": "std", "from_step": WARM_UP},
-}
+def _measures() -> dict[str, Any]:
+    """v_a averaged over the window after the warm-up, and its fluctuation (a fresh dict
+    per call: a caller may edit the sweep it gets)."""
+    return {
+        "va": {"observable": "polarization", "reduce": "mean", "from_step": WARM_UP},
+        "va_std": {"observable": "polarization", "reduce": "std", "from_step": WARM_UP},
+    }
 
 
 @register_sweep_preset(
@@ -86,7 +89,7 @@ def vicsek_1995_fig2a() -> dict[str, Any]:
                 {"path": "time.steps", "values": [6000, 6000, 8000]},
             ]},
         ],
-        "measure": _MEASURES,
+        "measure": _measures(),
         "series": ["polarization"],
         "keep": "summaries",
     }
@@ -104,7 +107,7 @@ def vicsek_1995_fig2b() -> dict[str, Any]:
         "base": _vicsek_1995_base(400, 20.0, 2.0, 6000),
         "axes": [{"path": "initial.N", "values": [round(rho * 400) for rho in densities]}],
         "replicas": 4,
-        "measure": _MEASURES,
+        "measure": _measures(),
         "series": ["polarization"],
         "keep": "summaries",
     }
