@@ -219,7 +219,7 @@ class Sweep(Strict):
             raise ValueError("give exactly one of 'base' (a scenario) and 'preset'")
         if self.overrides is not None and self.preset is None:
             raise ValueError("'overrides' apply to a preset only")
-        paths = [a.path for a in self._entries()]
+        paths = [a.path for a in self.axis_entries()]
         for i, p in enumerate(paths):
             for q in paths[:i]:
                 if p == q or p.startswith(q + ".") or q.startswith(p + "."):
@@ -227,7 +227,7 @@ class Sweep(Strict):
                                      "may be swept by one axis only)")
         if self._replicas_axis() and "replicas" in self.model_fields_set:
             raise ValueError("give 'replicas' either as a field or as an axis, not both")
-        for a in self._entries():
+        for a in self.axis_entries():
             if a.path == REPLICAS_PATH:
                 bad = [v for v in a.values if not (type(v) is int and 1 <= v <= MAX_RUNS)]
                 if bad:
@@ -248,7 +248,7 @@ class Sweep(Strict):
 
     # -- the grid -----------------------------------------------------------------------
 
-    def _entries(self) -> list[AxisValues]:
+    def axis_entries(self) -> list[AxisValues]:
         """Every (path, values) of every axis, zip members flattened."""
         return [m for a in self.axes for m in (a.zip if isinstance(a, ZipAxis) else [a])]
 
@@ -269,7 +269,7 @@ class Sweep(Strict):
         return math.prod(lengths)
 
     def _replicas_axis(self) -> bool:
-        return any(a.path == REPLICAS_PATH for a in self._entries())
+        return any(a.path == REPLICAS_PATH for a in self.axis_entries())
 
     def _replica_counts(self) -> list[int]:
         """Replicas per grid point (one entry for all when no axis sets them)."""

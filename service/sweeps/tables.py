@@ -38,7 +38,7 @@ SWEEP_FILE = "sweep.json"
 
 def axis_columns(sweep: Sweep) -> list[str]:
     """The axis paths that become columns (the 'replicas' pseudo-path is not one)."""
-    return [a.path for a in sweep._entries() if a.path != REPLICAS_PATH]
+    return [a.path for a in sweep.axis_entries() if a.path != REPLICAS_PATH]
 
 
 def write_tables(out_dir: Path, sweep: Sweep, runs: list[SweepRun],
