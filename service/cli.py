@@ -11,6 +11,7 @@ import json
 import shutil
 import signal
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -188,6 +189,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise BadInput(f"{exc}, or pass --overwrite to start it afresh") from exc
     except SweepError as exc:
         raise BadInput(_problems(args.sweep, exc.errors)) from exc
+    except OSError as exc:  # an unwritable or full output folder
+        raise BadInput(f"cannot write the sweep into {out}: {exc.strerror or exc}") from exc
     except BackendUnavailable as exc:
         print(f"flocklab: {exc}", file=sys.stderr)
         return EXIT_BACKEND
@@ -223,11 +226,14 @@ class _StopOnInterrupt:
         self.stopped = True
 
     def __enter__(self) -> _StopOnInterrupt:
-        self.previous = signal.signal(signal.SIGINT, self._handle)
+        # Signal handlers can only be set on the main thread (elsewhere: no Ctrl-C hook).
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGINT, self._handle)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        signal.signal(signal.SIGINT, self.previous)
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
 
 
 def cmd_validate(args: argparse.Namespace) -> int:

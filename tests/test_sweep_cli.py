@@ -85,6 +85,10 @@ def test_bad_sweeps_exit_2_listing_every_problem_before_anything_runs(tmp_path, 
     assert "not a sweep" in capsys.readouterr().err
     assert main(["run", write(tmp_path, "ok.json", SWEEP), "--out", str(tmp_path / "x")]) == 2
     assert "is a sweep: run it with `flocklab sweep" in capsys.readouterr().err
+    (tmp_path / "file").write_text("")
+    assert main(["sweep", write(tmp_path, "ok.json", SWEEP), "--out",
+                 str(tmp_path / "file")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
     assert main(["sweep", "preset:nope", "--out", str(tmp_path / "x")]) == 2
     assert "vicsek-1995-fig2a" in capsys.readouterr().err
     assert main(["validate", write(tmp_path, "ok.json", SWEEP)]) == 0

@@ -264,6 +264,8 @@ def _prepare(out_dir: Path, sweep: Sweep, runs: list[SweepRun]) -> None:
                 f"{out_dir} holds a different sweep ({old.get('name')!r}; its sweep.json "
                 "differs from this one): choose another folder")
         return
+    if out_dir.exists() and not out_dir.is_dir():
+        raise SweepFolderConflict(f"{out_dir} exists and is not a folder")
     if out_dir.exists() and any(out_dir.iterdir()):
         raise SweepFolderConflict(f"{out_dir} exists, is not empty and holds no sweep")
     out_dir.mkdir(parents=True, exist_ok=True)
