@@ -1,7 +1,9 @@
 """The sweep file: expansion (product x zip x replicas, seeds) and every refusal. No engine."""
 
 import copy
+import json
 import math
+from pathlib import Path
 
 import pytest
 
@@ -200,6 +202,13 @@ def test_vicsek_fig2_presets_state_the_full_protocol():
         assert r.scenario.space.L == 20.0 and r.scenario.model.eta == 2.0
     assert sorted(SWEEP_PRESETS) == ["vicsek-1995-fig2a", "vicsek-1995-fig2b"]
     assert math.isclose(b.n_runs, 40)
+
+
+def test_example_sweep_file_is_issue_14s_benchmark():
+    s = load_sweep(json.loads((Path(__file__).parent.parent / "examples" /
+                               "sweep-fig2a-reduced.json").read_text()))
+    assert (s.n_points, s.n_runs) == (20, 80)
+    assert s.total_agent_steps == 10 * 4 * (100 + 400) * 3000
 
 
 def test_sweep_json_schema_is_strict():
