@@ -89,10 +89,15 @@ def run_sweep(
     """
     runs = sweep.expand()
     out_dir = Path(out_dir)
-    _prepare(out_dir, sweep, runs)
-    records = {i: r for i, r in read_journal(out_dir).items() if i < len(runs)}
+    resuming = _check_folder(out_dir, sweep)
+    records = {i: r for i, r in read_journal(out_dir).items() if i < len(runs)} \
+        if resuming else {}
     resumed = len(records)
     pending = [r for r in runs if r.index not in records]
+    if pending:  # before the folder is made: a fixed sweep file is then no "other sweep"
+        _check_observables(sweep, pending[0])
+    if not resuming:
+        _create_folder(out_dir, sweep, runs)
     state = _State(sweep, runs, out_dir, records, on_progress)
     state.progress()
 
@@ -101,8 +106,6 @@ def run_sweep(
 
     journal = Journal(out_dir)
     try:
-        if pending:
-            _check_observables(sweep, pending[0])
         if sweep.keep == "all":
             _run_with_artifacts(pending, state, journal, stop, should_stop)
         else:
@@ -250,28 +253,33 @@ def _check_observables(sweep: Sweep, first: SweepRun) -> None:
     _require_observables(sweep, first, kernels.run(probe).observables)
 
 
-def _prepare(out_dir: Path, sweep: Sweep, runs: list[SweepRun]) -> None:
-    """Create the folder and its sweep.json, or check that it holds this very sweep."""
-    canonical = sweep.model_dump(mode="json")
+def _check_folder(out_dir: Path, sweep: Sweep) -> bool:
+    """Whether `out_dir` holds this very sweep (to resume); False when it is absent or
+    empty; SweepFolderConflict when it holds anything else."""
     path = out_dir / SWEEP_FILE
     if path.exists():
         try:
             old = json.loads(path.read_text())["sweep"]
         except (ValueError, KeyError, TypeError):
             raise SweepFolderConflict(f"{path} is not a flocklab sweep file") from None
-        if old != canonical:
+        if old != sweep.model_dump(mode="json"):
             raise SweepFolderConflict(
                 f"{out_dir} holds a different sweep ({old.get('name')!r}; its sweep.json "
                 "differs from this one): choose another folder")
-        return
+        return True
     if out_dir.exists() and not out_dir.is_dir():
         raise SweepFolderConflict(f"{out_dir} exists and is not a folder")
     if out_dir.exists() and any(out_dir.iterdir()):
         raise SweepFolderConflict(f"{out_dir} exists, is not empty and holds no sweep")
+    return False
+
+
+def _create_folder(out_dir: Path, sweep: Sweep, runs: list[SweepRun]) -> None:
+    """The folder and its sweep.json: the canonical sweep and every run."""
     out_dir.mkdir(parents=True, exist_ok=True)
     doc = {
         "flocklab_version": "0.1.0",
-        "sweep": canonical,
+        "sweep": sweep.model_dump(mode="json"),
         "base": sweep.base_scenario.model_dump(mode="json"),
         "n_points": sweep.n_points,
         "n_runs": len(runs),
@@ -282,4 +290,4 @@ def _prepare(out_dir: Path, sweep: Sweep, runs: list[SweepRun]) -> None:
         "runs": [{"run": r.index, "point": r.point, "replica": r.replica, "seed": r.seed,
                   "values": r.values} for r in runs],
     }
-    atomic_write(path, json.dumps(doc, indent=2, allow_nan=False))
+    atomic_write(out_dir / SWEEP_FILE, json.dumps(doc, indent=2, allow_nan=False))
