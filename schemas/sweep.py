@@ -109,7 +109,8 @@ class ZipAxis(Strict):
         return len(self.zip[0].values)
 
 
-_AXIS_TAGS = ("path-axis", "zip-axis")  # union tags pydantic puts in error paths
+# Union tags; pydantic puts them in error paths, which `field_errors` drops.
+_AXIS_TAGS = ("path-axis", "zip-axis")
 
 
 def _axis_kind(v: Any) -> str:
@@ -415,9 +416,7 @@ def load_sweep(data: Any) -> Sweep:
     try:
         sweep = Sweep.model_validate(data)
     except ValidationError as exc:
-        errors = field_errors(exc)
-        for e in errors:  # 'axes.1.path-axis.values' -> 'axes.1.values'
-            e.loc = ".".join(p for p in e.loc.split(".") if p not in _AXIS_TAGS)
+        errors = field_errors(exc)  # (it drops the axis union tags from the paths)
         # Unknown paths too, when the base is valid: every problem in one report.
         base = _raw_base(data) if isinstance(data, dict) else None
         if base is not None:
