@@ -26,12 +26,16 @@ ENGINE_BASE_BYTES = 256 * 2**20
 
 @dataclass(frozen=True)
 class Limits:
-    """Per-job maxima; all are checked, the first violated ones are reported by field."""
+    """Per-job maxima; all are checked, the first violated ones are reported by field.
+    A sweep's every run is held to them, and the sweep as a whole to the `max_sweep_*`
+    ones (see `sweep_limits`)."""
 
     max_agents: int
     max_steps: int
     max_trajectory_bytes: int
     max_memory_bytes: int
+    max_sweep_runs: int = 100_000
+    max_sweep_agent_steps: int = 10**12
 
     def to_dict(self) -> dict[str, int]:
         return asdict(self)
