@@ -10,7 +10,8 @@ FastAPI.
         frames = job.trajectory(stride=10, agents=slice(0, 100))
 """
 
-from .aio import AsyncClient, AsyncJob
+from ._sweeps import SweepFailed
+from .aio import AsyncClient, AsyncJob, AsyncSweepJob
 from .errors import (
     APIError,
     BadRequest,
@@ -27,12 +28,13 @@ from .errors import (
     Unauthorized,
     UnprocessableEntity,
 )
-from .sync import Client, Job
+from .sync import Client, Job, SweepJob
 
 __all__ = [
     "APIError",
     "AsyncClient",
     "AsyncJob",
+    "AsyncSweepJob",
     "BadRequest",
     "Client",
     "ClientError",
@@ -45,6 +47,8 @@ __all__ = [
     "PayloadTooLarge",
     "ServerError",
     "ServiceUnavailable",
+    "SweepFailed",
+    "SweepJob",
     "TooManyRequests",
     "Unauthorized",
     "UnprocessableEntity",

@@ -6,15 +6,20 @@ import hashlib
 import time
 from collections.abc import AsyncIterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
 
 from schemas import Scenario
+from schemas.status import SweepStatus
+from schemas.sweep import Sweep
 
-from . import _core
+from . import _core, _sweeps
 from .errors import JobTimeout, raise_for_status
+
+if TYPE_CHECKING:
+    import pandas
 
 
 class AsyncClient:
@@ -79,6 +84,31 @@ class AsyncClient:
             page = (await self.request("GET", "/v1/jobs", params=params)).json()
             for item in page["items"]:
                 yield AsyncJob(self, item)
+            if not page["next_cursor"]:
+                return
+            params["cursor"] = page["next_cursor"]
+
+    async def sweep(self, spec: Sweep | dict[str, Any] | None = None, *,
+                    sweep_preset: str | None = None, timeout_seconds: float | None = None,
+                    idempotency_key: str | None = None) -> AsyncSweepJob:
+        body = _sweeps.submission(spec, sweep_preset, timeout_seconds)
+        hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
+        r = await self.request("POST", "/v1/sweeps", json=body, headers=hdrs)
+        return AsyncSweepJob(self, SweepStatus.model_validate(r.json()))
+
+    async def get_sweep(self, sweep_id: str) -> AsyncSweepJob:
+        r = await self.request("GET", f"/v1/sweeps/{sweep_id}")
+        return AsyncSweepJob(self, SweepStatus.model_validate(r.json()))
+
+    async def sweeps(self, status: str | Sequence[str] | None = None, page_size: int = 100
+                     ) -> AsyncIterator[AsyncSweepJob]:
+        params: dict[str, Any] = {"limit": page_size}
+        if status is not None:
+            params["status"] = [status] if isinstance(status, str) else list(status)
+        while True:
+            page = (await self.request("GET", "/v1/sweeps", params=params)).json()
+            for item in page["items"]:
+                yield AsyncSweepJob(self, SweepStatus.model_validate(item))
             if not page["next_cursor"]:
                 return
             params["cursor"] = page["next_cursor"]
@@ -154,3 +184,78 @@ class AsyncJob(_core.JobState):
                     f.write(chunk)
         _core.check_digest(expected, digest.digest(), path)
         return path
+
+
+class AsyncSweepJob:
+    """The asynchronous twin of `clients.sync.SweepJob`."""
+
+    def __init__(self, client: AsyncClient, state: SweepStatus):
+        self.client = client
+        self.state = state
+
+    @property
+    def id(self) -> str:
+        return self.state.id
+
+    @property
+    def done(self) -> bool:
+        return self.state.status in _core.TERMINAL
+
+    def __repr__(self) -> str:
+        s = self.state
+        return f"<AsyncSweepJob {s.id} {s.status} {s.runs_done}/{s.runs_total} runs>"
+
+    async def status(self, wait: float = 0.0) -> SweepStatus:
+        params = {"wait": wait} if wait > 0 else None
+        r = await self.client.request("GET", f"/v1/sweeps/{self.id}", params=params,
+                                      timeout=self.client.timeout + wait)
+        self.state = SweepStatus.model_validate(r.json())
+        return self.state
+
+    async def wait(self, timeout: float | None = None, progress: bool | None = None
+                   ) -> np.ndarray:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        bar = _core.ProgressBar(progress)
+        try:
+            bar.update(self.state)  # type: ignore[arg-type]
+            while not self.done:
+                remaining = _core.LONG_POLL_SECONDS if deadline is None else (
+                    deadline - time.monotonic())
+                if remaining <= 0:
+                    raise JobTimeout(f"sweep {self.id} still {self.state.status} after "
+                                     f"{timeout} s")
+                await self.status(wait=min(_core.LONG_POLL_SECONDS, remaining))
+                bar.update(self.state)  # type: ignore[arg-type]
+        finally:
+            bar.close()
+        if self.state.status != "succeeded":
+            raise _sweeps.SweepFailed(self.state)
+        return await self.table()
+
+    async def spec(self) -> Sweep:
+        r = await self.client.request("GET", f"/v1/sweeps/{self.id}/spec")
+        return Sweep.model_validate_json(r.content)
+
+    async def cancel(self) -> SweepStatus:
+        r = await self.client.request("POST", f"/v1/sweeps/{self.id}/cancel")
+        self.state = SweepStatus.model_validate(r.json())
+        return self.state
+
+    async def table(self, name: str = "table") -> np.ndarray:
+        r = await self.client.request("GET", _sweeps.table_path(self.id, name),
+                                      params={"format": "json"})
+        return _sweeps.structured(r.json())
+
+    async def runs(self) -> np.ndarray:
+        return await self.table("runs")
+
+    async def series(self) -> np.ndarray:
+        return await self.table("series")
+
+    async def table_frame(self, name: str = "table") -> pandas.DataFrame:
+        return _sweeps.frame(await self.table(name))
+
+    async def csv(self, name: str = "table") -> str:
+        r = await self.client.request("GET", _sweeps.table_path(self.id, name),
+                                      params={"format": "csv"})
+        return r.text

@@ -6,15 +6,20 @@ import hashlib
 import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
 
 from schemas import Scenario
+from schemas.status import SweepStatus
+from schemas.sweep import Sweep
 
-from . import _core
+from . import _core, _sweeps
 from .errors import JobTimeout, raise_for_status
+
+if TYPE_CHECKING:
+    import pandas
 
 
 class Client:
@@ -86,6 +91,39 @@ class Client:
             page = self.request("GET", "/v1/jobs", params=params).json()
             for item in page["items"]:
                 yield Job(self, item)
+            if not page["next_cursor"]:
+                return
+            params["cursor"] = page["next_cursor"]
+
+    # -- sweeps ---------------------------------------------------------------------------
+
+    def sweep(self, spec: Sweep | dict[str, Any] | None = None, *,
+              sweep_preset: str | None = None, timeout_seconds: float | None = None,
+              idempotency_key: str | None = None) -> SweepJob:
+        """Submit a sweep (a `schemas.sweep.Sweep` or a dict) or a named sweep
+        (`sweep_preset="vicsek-1995-fig2a"`); returns its handle.
+
+        >>> table = c.sweep(spec).wait()      # numpy structured array, a row per grid point
+        """
+        body = _sweeps.submission(spec, sweep_preset, timeout_seconds)
+        hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
+        r = self.request("POST", "/v1/sweeps", json=body, headers=hdrs)
+        return SweepJob(self, SweepStatus.model_validate(r.json()))
+
+    def get_sweep(self, sweep_id: str) -> SweepJob:
+        r = self.request("GET", f"/v1/sweeps/{sweep_id}")
+        return SweepJob(self, SweepStatus.model_validate(r.json()))
+
+    def sweeps(self, status: str | Sequence[str] | None = None, page_size: int = 100
+               ) -> Iterator[SweepJob]:
+        """Every sweep, newest first, fetched a page at a time."""
+        params: dict[str, Any] = {"limit": page_size}
+        if status is not None:
+            params["status"] = [status] if isinstance(status, str) else list(status)
+        while True:
+            page = self.request("GET", "/v1/sweeps", params=params).json()
+            for item in page["items"]:
+                yield SweepJob(self, SweepStatus.model_validate(item))
             if not page["next_cursor"]:
                 return
             params["cursor"] = page["next_cursor"]
@@ -173,3 +211,89 @@ class Job(_core.JobState):
         _core.check_digest(expected, digest.digest(), path)
         return path
 
+
+
+class SweepJob:
+    """A handle on one sweep. `state` is the `SweepStatus` of the last response."""
+
+    def __init__(self, client: Client, state: SweepStatus):
+        self.client = client
+        self.state = state
+
+    @property
+    def id(self) -> str:
+        return self.state.id
+
+    @property
+    def done(self) -> bool:
+        return self.state.status in _core.TERMINAL
+
+    def __repr__(self) -> str:
+        s = self.state
+        return f"<SweepJob {s.id} {s.status} {s.runs_done}/{s.runs_total} runs>"
+
+    def status(self, wait: float = 0.0) -> SweepStatus:
+        """Re-read the sweep; with `wait`, long-poll until it changes or `wait` s pass."""
+        params = {"wait": wait} if wait > 0 else None
+        r = self.client.request("GET", f"/v1/sweeps/{self.id}", params=params,
+                                timeout=self.client.timeout + wait)
+        self.state = SweepStatus.model_validate(r.json())
+        return self.state
+
+    def wait(self, timeout: float | None = None, progress: bool | None = None) -> np.ndarray:
+        """Block until the sweep has finished and return its table (`table()`).
+
+        Raises SweepFailed when it failed, timed out or was cancelled, and JobTimeout
+        after `timeout` seconds (the sweep goes on). `progress` draws a bar over runs on
+        stderr (default: when stderr is a terminal).
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        bar = _core.ProgressBar(progress)
+        try:
+            bar.update(self.state)  # type: ignore[arg-type]
+            while not self.done:
+                remaining = _core.LONG_POLL_SECONDS if deadline is None else (
+                    deadline - time.monotonic())
+                if remaining <= 0:
+                    raise JobTimeout(f"sweep {self.id} still {self.state.status} after "
+                                     f"{timeout} s")
+                self.status(wait=min(_core.LONG_POLL_SECONDS, remaining))
+                bar.update(self.state)  # type: ignore[arg-type]
+        finally:
+            bar.close()
+        if self.state.status != "succeeded":
+            raise _sweeps.SweepFailed(self.state)
+        return self.table()
+
+    def spec(self) -> Sweep:
+        """The sweep as the service stores it (every default filled in)."""
+        return Sweep.model_validate_json(self.client.request(
+            "GET", f"/v1/sweeps/{self.id}/spec").content)
+
+    def cancel(self) -> SweepStatus:
+        """Stop the sweep; the runs it finished stay available (`table()`)."""
+        r = self.client.request("POST", f"/v1/sweeps/{self.id}/cancel")
+        self.state = SweepStatus.model_validate(r.json())
+        return self.state
+
+    def table(self, name: str = "table") -> np.ndarray:
+        """A row per grid point: the axes, then each measure's mean, sd, sem and count.
+        `name` "runs" gives a row per run, "series" the replica-averaged time series."""
+        r = self.client.request("GET", _sweeps.table_path(self.id, name),
+                                params={"format": "json"})
+        return _sweeps.structured(r.json())
+
+    def runs(self) -> np.ndarray:
+        return self.table("runs")
+
+    def series(self) -> np.ndarray:
+        return self.table("series")
+
+    def table_frame(self, name: str = "table") -> pandas.DataFrame:
+        """`table(name)` as a pandas DataFrame (needs pandas, which flocklab does not)."""
+        return _sweeps.frame(self.table(name))
+
+    def csv(self, name: str = "table") -> str:
+        """The table exactly as the service stores it (CSV text)."""
+        return self.client.request("GET", _sweeps.table_path(self.id, name),
+                                   params={"format": "csv"}).text

@@ -14,8 +14,8 @@ import numpy as np
 
 from schemas import Scenario
 
-from . import runtime
-from .model import KERNELS, ModelKernel
+from . import batch, runtime
+from .model import ModelKernel
 from .result import FrameSink, RunResult, SimulationDiverged
 
 ProgressFn = Callable[[int, int], None]
@@ -38,10 +38,12 @@ def run(
     "diverged" with the step and likely cause; what was recorded before it is kept.
     """
     rt = runtime.ensure(scenario.backend, scenario.threads)
-    from . import models  # noqa: F401  (registers every model kernel)
-
+    make = fused_batch(scenario, rt.backend)
+    if make is not None:
+        return batch.run_batch(make, [scenario], backend=rt.backend, sinks=[sink],
+                               on_progress=on_progress, should_stop=should_stop)[0]
     t0 = time.perf_counter()
-    model: ModelKernel = KERNELS[scenario.model.kind](scenario)
+    model: ModelKernel = _registry()[scenario.model.kind](scenario)
     setup_seconds = time.perf_counter() - t0
     rec = scenario.recording
     steps = scenario.time.steps
@@ -109,12 +111,33 @@ def run(
         observables=obs,
         final=final,
         convergence=convergence,
-        extra={"setup_seconds": setup_seconds, **model.extra()},
+        extra={"setup_seconds": setup_seconds, "engine_path": "per_step", **model.extra()},
         error=error,
     )
 
 
 ResultFn = Callable[[int, RunResult], None]
+# The small-N path runs one replica per CPU task, serially inside: it beats the per-step
+# path (parallel over agents, one launch per pass) up to about this N on this CPU.
+FUSED_MAX_N = 20_000
+# Replicas per fused launch: enough to fill the cores, few enough to poll for a stop.
+BATCH_AGENTS = 400_000
+
+
+def _registry() -> dict[str, type[ModelKernel]]:
+    from . import models  # registers every model kernel (imports Taichi, never ti.init)
+
+    return models.KERNELS
+
+
+def fused_batch(scenario: Scenario, backend: str) -> Callable | None:
+    """The fused small-N batch class for `scenario`, or None for the per-step path. Decided
+    from the scenario (and the backend that runs it) alone, so a run's bits never depend
+    on the company it keeps."""
+    cls = _registry()[scenario.model.kind].batch
+    if cls is None or backend != "cpu" or scenario.n_agents > FUSED_MAX_N:
+        return None
+    return cls if cls.batch_key(scenario) is not None else None
 
 
 def run_batch(
@@ -130,15 +153,43 @@ def run_batch(
     called as each run finishes. Once `should_stop()` is true, the runs in progress end
     "cancelled" and the runs not yet started are left out of the returned list.
     """
-    results: list[RunResult] = []
-    for i, sc in enumerate(scenarios):
+    results: dict[int, RunResult] = {}
+    for group in _batches(scenarios):
         if should_stop is not None and should_stop():
             break
-        res = run(sc, should_stop=should_stop)
-        results.append(res)
-        if on_result is not None:
-            on_result(i, res)
-    return results
+        first = scenarios[group[0]]
+        rt = runtime.ensure(first.backend, first.threads)
+        make = fused_batch(first, rt.backend)
+        if make is None:
+            done = [run(first, should_stop=should_stop)]
+        else:
+            done = batch.run_batch(make, [scenarios[i] for i in group], backend=rt.backend,
+                                   should_stop=should_stop)
+        for i, res in zip(group, done, strict=True):
+            results[i] = res
+            if on_result is not None:
+                on_result(i, res)
+    return [results[i] for i in sorted(results)]
+
+
+def _batches(scenarios: Sequence[Scenario]) -> list[list[int]]:
+    """Indices grouped into launches: same backend, threads and fused batch key, at most
+    BATCH_AGENTS agents each; a per-step scenario is a group of its own."""
+    groups: dict[tuple, list[list[int]]] = {}
+    out: list[list[int]] = []
+    for i, sc in enumerate(scenarios):
+        cls = _registry()[sc.model.kind].batch
+        key = None if cls is None or sc.n_agents > FUSED_MAX_N else cls.batch_key(sc)
+        if key is None:
+            out.append([i])
+            continue
+        lanes = groups.setdefault((sc.backend, sc.threads, key), [[]])
+        if lanes[-1] and sum(scenarios[j].n_agents for j in lanes[-1]) + sc.n_agents > (
+                BATCH_AGENTS):
+            lanes.append([])
+        lanes[-1].append(i)
+    out.extend(g for lanes in groups.values() for g in lanes if g)
+    return sorted(out)
 
 
 def time_to_converge(t: np.ndarray, values: np.ndarray, tol: float) -> float | None:

@@ -23,6 +23,8 @@ class ModelKernel(ABC):
     """
 
     kind: ClassVar[str]
+    # The fused small-N batch (many steps of many replicas per launch), if the model has one.
+    batch: ClassVar[Any] = None
 
     def __init__(self, scenario: Scenario):
         self.scenario = scenario

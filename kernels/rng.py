@@ -26,9 +26,7 @@ def _mix_int(x: int) -> int:
 
 def step_key(seed: int, stream: int, step: int) -> int:
     """A 32-bit key for one (seed, stream, step); kernels combine it with the agent id."""
-    k = _mix_int(_mix_int((seed >> 32) & _M32) ^ (seed & _M32))
-    k = _mix_int(k ^ _mix_int(stream))
-    return _mix_int(k ^ _mix_int(step & _M32) ^ ((step >> 32) & _M32))
+    return _mix_int(seed_key(seed, stream) ^ _mix_int(step & _M32) ^ ((step >> 32) & _M32))
 
 
 @ti.func
@@ -62,3 +60,10 @@ def uniform_np(key: int, agents: np.ndarray) -> np.ndarray:
     """numpy twin of `uniform` (same bits)."""
     h = _mix_np(_mix_np(agents.astype(np.uint32) ^ np.uint32(key)) + np.uint32(0x9E3779B9))
     return h.astype(np.float64) * (1.0 / 4294967296.0)
+
+
+def seed_key(seed: int, stream: int) -> int:
+    """The (seed, stream) part of `step_key`: step_key = mix(seed_key ^ mix(step)) for
+    steps below 2^32, which a kernel can finish itself."""
+    k = _mix_int(_mix_int((seed >> 32) & _M32) ^ (seed & _M32))
+    return _mix_int(k ^ _mix_int(stream))

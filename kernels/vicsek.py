@@ -28,6 +28,7 @@ from .initial import initial_state
 from .layout import SortedState
 from .model import ModelKernel, register_kernel
 from .result import SimulationDiverged
+from .vicsek_fused import VicsekBatch
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
@@ -161,6 +162,7 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
 @register_kernel
 class VicsekKernel(ModelKernel):
     kind = "vicsek"
+    batch = VicsekBatch
 
     def __init__(self, scenario: Scenario):
         super().__init__(scenario)

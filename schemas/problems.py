@@ -53,7 +53,8 @@ def _is_union_tag(part: str | int) -> bool:
     return isinstance(part, str) and (part in MODELS or part in _MEMBER_TAGS)
 
 
-_MEMBER_TAGS = {"periodic", "plane", "box", "disc", "lattice", "random", "explicit"}
+_MEMBER_TAGS = {"periodic", "plane", "box", "disc", "lattice", "random", "explicit",
+                "path-axis", "zip-axis"}  # the last two: a sweep's axis kinds
 
 
 def json_safe(value: Any) -> Any:

@@ -1,4 +1,4 @@
-"""The `flocklab` command: run, validate, models, presets, serve.
+"""The `flocklab` command: run, sweep, validate, models, presets, serve.
 
 Exit codes: 0 success; 1 the run diverged or was interrupted; 2 bad input (invalid
 scenario, unreadable file, unknown preset); 3 the requested backend is unavailable.
@@ -8,14 +8,29 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
+import signal
 import sys
+import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from pydantic import ValidationError
 
-from schemas import PRESETS, Scenario, describe_models, field_errors, get_preset, parse_json_strict
+from schemas import (
+    PRESETS,
+    FieldError,
+    Scenario,
+    describe_models,
+    field_errors,
+    get_preset,
+    parse_json_strict,
+)
+from schemas.paths import PathError, parse_assignment, set_path
+from schemas.sweep import Sweep, SweepError, describe_sweep, is_sweep_document, load_sweep
+from schemas.sweep_presets import SWEEP_PRESETS
 from schemas.vicsek_presets import DEFAULT_PRESET
 
 EXIT_OK, EXIT_RUN_FAILED, EXIT_BAD_INPUT, EXIT_BACKEND = 0, 1, 2, 3
@@ -25,34 +40,88 @@ class BadInput(Exception):
     """A user-facing input problem: printed as is, exit code 2."""
 
 
-def load_scenario(source: str) -> Scenario:
-    """A scenario from a JSON file path, '-' for stdin, or 'preset:NAME'."""
-    if source.startswith("preset:"):
+def load_scenario(source: str, sets: Sequence[str] = ()) -> Scenario:
+    """A scenario from a JSON file path, '-' for stdin, or 'preset:NAME', with `--set
+    PATH=VALUE` assignments applied (the same dotted paths as a sweep's axes)."""
+    if source.startswith("preset:") and not sets:
         try:
             return get_preset(source.removeprefix("preset:"))
         except KeyError as exc:
             raise BadInput(str(exc.args[0])) from exc
+    scenario = _validated(source, _scenario_data(source))
+    if not sets:
+        return scenario
+    doc = scenario.model_dump(mode="json")
+    for text in sets:
+        try:
+            path, value = parse_assignment(text)
+            doc = set_path(doc, path, value)
+        except PathError as exc:
+            raise BadInput(f"--set {exc}") from exc
+    return _validated(f"{source} with --set {' --set '.join(sets)}", doc)
+
+
+def _scenario_data(source: str) -> Any:
+    if source.startswith("preset:"):
+        name = source.removeprefix("preset:")
+        if name not in PRESETS:
+            raise BadInput(f"unknown preset {name!r}; known: {', '.join(sorted(PRESETS))}")
+        return PRESETS[name].build()
+    data = read_json(source)
+    if is_sweep_document(data):
+        raise BadInput(f"{source} is a sweep: run it with `flocklab sweep {source} --out DIR`")
+    return data
+
+
+def _validated(source: str, data: Any) -> Scenario:
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as exc:
+        raise BadInput(_problems(source, field_errors(exc))) from exc
+
+
+def read_json(source: str) -> Any:
+    """A JSON document from a file path or '-' (stdin); NaN and ±Inf are refused."""
     try:
         text = sys.stdin.read() if source == "-" else Path(source).read_text()
     except OSError as exc:
         raise BadInput(f"cannot read {source}: {exc.strerror}") from exc
     try:
-        data = parse_json_strict(text)
+        return parse_json_strict(text)
     except ValueError as exc:
         raise BadInput(f"{source}: not valid JSON: {exc}") from exc
+
+
+def _problems(source: str, errors: list[FieldError]) -> str:
+    lines = [f"{source}: {len(errors)} problem(s):"]
+    return "\n".join(lines + [f"  {e.loc}: {e.msg}" for e in errors])
+
+
+def load_sweep_source(source: str) -> Sweep:
+    """A sweep from a JSON file, '-' or 'preset:NAME' (a named sweep), fully checked."""
+    if source.startswith("preset:"):
+        name = source.removeprefix("preset:")
+        if name not in SWEEP_PRESETS:
+            raise BadInput(f"unknown sweep preset {name!r}; known: "
+                           f"{', '.join(sorted(SWEEP_PRESETS))}")
+        data = SWEEP_PRESETS[name].build()
+    else:
+        data = read_json(source)
+        if not is_sweep_document(data):
+            raise BadInput(f"{source}: not a sweep (a sweep has 'axes', 'base' or 'preset'; "
+                           "run a scenario with `flocklab run`)")
     try:
-        return Scenario.model_validate(data)
-    except ValidationError as exc:
-        lines = [f"{source}: {len(exc.errors())} problem(s):"]
-        lines += [f"  {e.loc}: {e.msg}" for e in field_errors(exc)]
-        raise BadInput("\n".join(lines)) from exc
+        return load_sweep(data)
+    except SweepError as exc:
+        raise BadInput(_problems(source, exc.errors)) from exc
 
 
 class ProgressBar:
     """A one-line progress bar on a terminal; silent when stderr is not a terminal."""
 
-    def __init__(self, enabled: bool):
+    def __init__(self, enabled: bool, unit: str = "step"):
         self.enabled = enabled
+        self.unit = unit
         self.t0 = time.perf_counter()
 
     def __call__(self, done: int, total: int) -> None:
@@ -62,7 +131,7 @@ class ProgressBar:
         elapsed = time.perf_counter() - self.t0
         eta = elapsed * (1 - frac) / frac if frac > 0 else 0.0
         bar = "#" * int(30 * frac)
-        sys.stderr.write(f"\r[{bar:<30}] {100 * frac:5.1f}%  step {done}/{total}  "
+        sys.stderr.write(f"\r[{bar:<30}] {100 * frac:5.1f}%  {self.unit} {done}/{total}  "
                          f"eta {eta:6.1f}s")
         if done >= total:
             sys.stderr.write("\n")
@@ -70,7 +139,7 @@ class ProgressBar:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    scenario = load_scenario(args.scenario)
+    scenario = load_scenario(args.scenario, args.set or ())
     if args.backend:
         scenario = scenario.model_copy(update={"backend": args.backend})
     from kernels import BackendUnavailable
@@ -96,17 +165,108 @@ def cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    sweep = load_sweep_source(args.sweep)
+    out = Path(args.out)
+    if args.overwrite and out.exists():
+        if not (out / "sweep.json").exists():
+            raise BadInput(f"{out} holds no sweep; --overwrite replaces sweep folders only")
+        shutil.rmtree(out)
+    from kernels import BackendUnavailable
+
+    from .sweeps.runner import SweepFolderConflict, run_sweep
+
+    show = sys.stderr.isatty() and not args.quiet
+    bar = ProgressBar(show, unit="run")
+    stop = _StopOnInterrupt()
+    t0 = time.perf_counter()
+    try:
+        with stop:
+            outcome = run_sweep(sweep, out, should_stop=stop,
+                                on_progress=lambda p: bar(p.runs_done + p.runs_failed,
+                                                          p.runs_total))
+    except SweepFolderConflict as exc:
+        raise BadInput(f"{exc}, or pass --overwrite to start it afresh") from exc
+    except SweepError as exc:
+        raise BadInput(_problems(args.sweep, exc.errors)) from exc
+    except OSError as exc:  # an unwritable or full output folder
+        raise BadInput(f"cannot write the sweep into {out}: {exc.strerror or exc}") from exc
+    except BackendUnavailable as exc:
+        print(f"flocklab: {exc}", file=sys.stderr)
+        return EXIT_BACKEND
+    print(json.dumps({"out": str(out), "status": outcome.status,
+                      "runs_done": outcome.runs_done, "runs_failed": outcome.runs_failed,
+                      "runs_total": outcome.runs_total, "runs_resumed": outcome.runs_resumed,
+                      "wall_seconds": round(time.perf_counter() - t0, 3)}))
+    finished = outcome.runs_done + outcome.runs_failed
+    if outcome.status == "cancelled":
+        print(f"flocklab: interrupted: {finished} of {outcome.runs_total} runs finished and "
+              f"kept in {out}; run the same command again to resume", file=sys.stderr)
+        return EXIT_RUN_FAILED
+    if outcome.runs_failed:
+        print(f"flocklab: {outcome.runs_failed} run(s) diverged (status in runs.csv; left "
+              "out of table.csv)", file=sys.stderr)
+    return EXIT_OK
+
+
+class _StopOnInterrupt:
+    """The sweep's should_stop: true after Ctrl-C (SIGINT), so the run in progress stops
+    between steps and the finished runs are kept. A second Ctrl-C interrupts at once."""
+
+    def __init__(self) -> None:
+        self.stopped = False
+        self.previous: Any = None
+
+    def __call__(self) -> bool:
+        return self.stopped
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.stopped:
+            raise KeyboardInterrupt
+        self.stopped = True
+
+    def __enter__(self) -> _StopOnInterrupt:
+        # Signal handlers can only be set on the main thread (elsewhere: no Ctrl-C hook).
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
-    scenario = load_scenario(args.scenario)
-    print(f"{args.scenario}: valid ({scenario.model.kind}, N = {scenario.n_agents}, "
+    source = args.scenario
+    if source.startswith("preset:"):
+        name = source.removeprefix("preset:")
+        if name in SWEEP_PRESETS:
+            return _validate_sweep(source, SWEEP_PRESETS[name].build())
+        scenario = load_scenario(source)
+    else:
+        data = read_json(source)
+        if is_sweep_document(data):
+            return _validate_sweep(source, data)
+        scenario = _validated(source, data)
+    print(f"{source}: valid ({scenario.model.kind}, N = {scenario.n_agents}, "
           f"{scenario.time.steps} steps, {scenario.n_frames} frames)")
+    return EXIT_OK
+
+
+def _validate_sweep(source: str, data: Any) -> int:
+    try:
+        sweep = load_sweep(data)
+    except SweepError as exc:
+        raise BadInput(_problems(source, exc.errors)) from exc
+    print(f"{source}: valid sweep ({sweep.n_points} grid points, {sweep.n_runs} runs, "
+          f"{sweep.total_agent_steps:.4g} agent-steps)")
     return EXIT_OK
 
 
 def cmd_models(args: argparse.Namespace) -> int:
     catalog = describe_models()
-    if args.json:
-        print(json.dumps(catalog, indent=2))
+    if args.json:  # the models, then the sweep file's schema (kind "sweep")
+        print(json.dumps([*catalog, describe_sweep()], indent=2))
         return EXIT_OK
     for m in catalog:
         print(f"{m['kind']}: {m['summary']}")
@@ -123,13 +283,20 @@ def cmd_models(args: argparse.Namespace) -> int:
 
 
 def cmd_presets(args: argparse.Namespace) -> int:
+    if args.name in SWEEP_PRESETS:
+        print(json.dumps(SWEEP_PRESETS[args.name].build(), indent=2))
+        return EXIT_OK
     if args.name:
         if args.name not in PRESETS:
-            raise BadInput(f"unknown preset {args.name!r}; known: {', '.join(sorted(PRESETS))}")
+            known = ", ".join(sorted([*PRESETS, *SWEEP_PRESETS]))
+            raise BadInput(f"unknown preset {args.name!r}; known: {known}")
         print(get_preset(args.name).model_dump_json(indent=2))
         return EXIT_OK
     for p in PRESETS.values():
         print(f"{p.name}: {p.description}")
+    print("\nsweeps (flocklab sweep preset:NAME --out DIR):")
+    for sp in SWEEP_PRESETS.values():
+        print(f"{sp.name}: {sp.description}")
     return EXIT_OK
 
 
@@ -157,9 +324,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override the scenario's backend")
     p.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--set", action="append", metavar="PATH=VALUE",
+                   help="override a field, e.g. --set model.eta=3 --set initial.N=400 "
+                   "(VALUE is JSON, else a string; repeatable)")
     p.set_defaults(fn=cmd_run)
-    p = sub.add_parser("validate", help="check a scenario and report every problem")
-    p.add_argument("scenario", help="scenario JSON file, '-' for stdin, or preset:NAME")
+    p = sub.add_parser("sweep", help="run a sweep (many runs, one table) into a folder; "
+                       "running it again resumes")
+    p.add_argument("sweep", help="sweep JSON file, '-' for stdin, or preset:NAME")
+    p.add_argument("--out", required=True, help="output folder (resumed if it holds this "
+                   "sweep)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="discard a sweep folder's finished runs and start afresh")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(fn=cmd_sweep)
+    p = sub.add_parser("validate", help="check a scenario or a sweep; report every problem")
+    p.add_argument("scenario", help="scenario or sweep JSON file, '-' for stdin, or "
+                   "preset:NAME")
     p.set_defaults(fn=cmd_validate)
     p = sub.add_parser("models", help="list the models, their parameters and equations")
     p.add_argument("--json", action="store_true", help="machine-readable catalog")

@@ -18,11 +18,14 @@ import shutil
 import uuid
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from schemas import Scenario
+
+if TYPE_CHECKING:
+    from kernels import RunResult
 
 ARTIFACTS = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5")
 
@@ -33,6 +36,19 @@ def write_observables_csv(path: Path, observables: dict[str, np.ndarray]) -> Non
     np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
 
 
+def run_summary(scenario: Scenario, result: RunResult, *, frames: int,
+                files: list[str]) -> dict[str, Any]:
+    """The JSON-ready summary.json of one run (a job's, or a sweep run's)."""
+    return {
+        "flocklab_version": "0.1.0",
+        "scenario_name": scenario.name,
+        "model": scenario.model.kind,
+        **result.summary(),
+        "frames": frames,
+        "files": files,
+    }
+
+
 def execute_to_dir(
     scenario: Scenario,
     out_dir: Path,
@@ -40,8 +56,10 @@ def execute_to_dir(
     on_progress: Callable[[int, int], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
     overwrite: bool = False,
+    on_result: Callable[[RunResult], None] | None = None,
 ) -> dict[str, Any]:
-    """Run `scenario` and write its artifacts to `out_dir`. Returns the summary dict."""
+    """Run `scenario` and write its artifacts to `out_dir`. Returns the summary dict;
+    `on_result` gets the engine's result before the folder is moved into place."""
     import kernels  # the engine: only where a simulation runs
 
     from .h5md import H5MDWriter
@@ -63,14 +81,9 @@ def execute_to_dir(
         finally:
             writer.close()
         write_observables_csv(tmp / "observables.csv", result.observables)
-        summary = {
-            "flocklab_version": "0.1.0",
-            "scenario_name": scenario.name,
-            "model": scenario.model.kind,
-            **result.summary(),
-            "frames": writer.frames,
-            "files": list(ARTIFACTS),
-        }
+        summary = run_summary(scenario, result, frames=writer.frames, files=list(ARTIFACTS))
+        if on_result is not None:
+            on_result(result)
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
         _fsync_dir(tmp)
         if out_dir.exists():

@@ -41,6 +41,15 @@ def scenario(rule="vicsek", N=60, L=6.0, r=1.0, eta=0.0, steps=20, v0=0.1, seed=
     })
 
 
+@pytest.fixture(params=["fused", "per_step"])
+def path(request, monkeypatch, taichi_cpu):
+    """Run the test on both engine paths: the fused small-N one (default at these sizes)
+    and the per-step one (forced by lowering the fused path's size limit)."""
+    if request.param == "per_step":
+        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
+    return request.param
+
+
 def run_frames(sc):
     sink = Frames()
     result = kernels.run(sc, sink=sink)
@@ -55,6 +64,9 @@ def wrapped_diff(a, b, L):
 
 CASES = [
     dict(rule="vicsek", eta=0.0),
+    dict(rule="vicsek", eta=0.9, N=30),  # all pairs (the fused path's small-N visit)
+    dict(rule="vicsek", eta=0.9, L=2.5),  # fewer than 3 cells across: all pairs
+    dict(rule="average", eta=0.2, N=30, L=None),
     dict(rule="vicsek", eta=1.3),
     dict(rule="vicsek", eta=0.4, L=None, move="new_heading"),
     dict(rule="average"),
@@ -67,7 +79,7 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()))
-def test_matches_brute_force_step_by_step(taichi_cpu, case):
+def test_matches_brute_force_step_by_step(path, case):
     sc = scenario(**case)
     _, sink = run_frames(sc)
     p = sc.model
@@ -128,7 +140,7 @@ def test_full_noise_polarization_matches_random_headings(taichi_cpu):
     assert abs(phi.mean() - expected) < 4 * stderr, (phi.mean(), expected, stderr)
 
 
-def test_no_noise_all_in_range_aligns_in_one_step(taichi_cpu):
+def test_no_noise_all_in_range_aligns_in_one_step(path):
     sc = scenario(rule="vicsek", N=200, L=10.0, steps=1, every=0,
                   region={"kind": "disc", "center": [5, 5], "radius": 0.45})
     result = kernels.run(sc)
@@ -137,7 +149,7 @@ def test_no_noise_all_in_range_aligns_in_one_step(taichi_cpu):
     assert result.observables["degree_mean"][0] == 199  # everyone saw everyone
 
 
-def test_same_seed_same_trajectory_bit_for_bit(taichi_cpu):
+def test_same_seed_same_trajectory_bit_for_bit(path):
     a = run_frames(scenario(eta=1.0, N=2000, L=20.0, steps=15))[1]
     b = run_frames(scenario(eta=1.0, N=2000, L=20.0, steps=15))[1]
     c = run_frames(scenario(eta=1.0, N=2000, L=20.0, steps=15, seed=12))[1]
@@ -146,7 +158,7 @@ def test_same_seed_same_trajectory_bit_for_bit(taichi_cpu):
     assert not (a.theta[-1] == c.theta[-1]).all()
 
 
-def test_thread_count_does_not_change_the_trajectory(taichi_cpu):
+def test_thread_count_does_not_change_the_trajectory(path):
     base = scenario(eta=1.0, N=3000, L=25.0, steps=10)
     one = run_frames(base.model_copy(update={"threads": 1}))[1]
     two = run_frames(base.model_copy(update={"threads": 2}))[1]
@@ -154,14 +166,14 @@ def test_thread_count_does_not_change_the_trajectory(taichi_cpu):
     assert all((x == y).all() for x, y in zip(one.pos, two.pos, strict=True))
 
 
-def test_linked_intervals_counted(taichi_cpu):
+def test_linked_intervals_counted(path):
     sc = scenario(rule="average", N=40, L=4.0, steps=30, every=0)  # dense: always connected
     result = kernels.run(sc)
     li = result.extra["linked_intervals"]
     assert li["count"] == 30 and li["longest_steps"] == 1
 
 
-def test_blow_up_is_reported_with_its_step(taichi_cpu):
+def test_blow_up_is_reported_with_its_step(path):
     sc = scenario(rule="vicsek", L=None, v0=1e300, steps=50, every=5)
     result = kernels.run(sc)
     assert result.status == "diverged"
@@ -171,7 +183,7 @@ def test_blow_up_is_reported_with_its_step(taichi_cpu):
 
 
 @pytest.mark.parametrize("L", [6.0, None])
-def test_graph_observables_match_brute_force(taichi_cpu, L):
+def test_graph_observables_match_brute_force(path, L):
     """Degrees and components of G(0), as fused into the step kernel, against numpy."""
     from scipy.sparse.csgraph import connected_components
 

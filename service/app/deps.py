@@ -34,8 +34,11 @@ JobId = Annotated[uuid.UUID, Path(description="The job's id (a UUID).",
                                   examples=["3f2b8e1c-8f3a-4c55-9d2e-0c6b1f8e9a41"])]
 
 
-def get_job(runtime: JobRuntime, job_id: uuid.UUID) -> Job:
+def get_job(runtime: JobRuntime, job_id: uuid.UUID, kind: str = "job") -> Job:
+    """The job (or, with kind="sweep", the sweep) with this id; 404 when there is none of
+    that kind (a sweep's id is not a job's and the other way round)."""
     job = runtime.store.get(str(job_id))
-    if job is None:
-        raise ProblemError(404, "job-not-found", "Job not found", f"no job with id {job_id}")
+    if job is None or job.kind != kind:
+        raise ProblemError(404, f"{kind}-not-found", f"{kind.capitalize()} not found",
+                           f"no {kind} with id {job_id}")
     return job

@@ -16,6 +16,7 @@ from pydantic.json_schema import models_json_schema
 from starlette.concurrency import run_in_threadpool
 
 from schemas import Problem, Scenario
+from schemas.sweep import Sweep
 from service.jobs import JobRuntime
 
 from .admission import AdmissionMiddleware
@@ -23,8 +24,9 @@ from .auth import require_api_key
 from .body_limit import BodyLimitMiddleware
 from .events import ChangeHub
 from .problems import PROBLEM_MEDIA_TYPE, UnexpectedErrorMiddleware, install_problem_handlers
-from .routers import catalog, health, jobs, results
+from .routers import catalog, health, jobs, results, sweeps
 from .settings import Settings, load_settings
+from .sweep_wire import SweepRequest
 from .wire import JobRequest
 
 VERSION = "0.1.0"
@@ -63,6 +65,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   redoc_url="/redoc" if public_docs else None, openapi_tags=[
                       {"name": "jobs", "description": "Submit, follow and cancel jobs."},
                       {"name": "results", "description": "Metrics and trajectories."},
+                      {"name": "sweeps", "description": "Parameter sweeps: many runs, "
+                       "one table."},
                       {"name": "catalog", "description": "Models and presets."},
                       {"name": "health", "description": "Probes."}])
     app.state.settings = settings
@@ -79,7 +83,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(UnexpectedErrorMiddleware)  # outermost: catches every layer's error
     app.include_router(health.router)
     auth = [Depends(require_api_key)]
-    for module in (jobs, results, catalog):
+    for module in (jobs, results, sweeps, catalog):
         app.include_router(module.router, prefix="/v1", dependencies=auth)
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     if not public_docs:
@@ -98,7 +102,8 @@ def _openapi(app: FastAPI) -> dict[str, Any]:
                          routes=app.routes, tags=app.openapi_tags)
     components = schema.setdefault("components", {}).setdefault("schemas", {})
     _, defs = models_json_schema(
-        [(JobRequest, "validation"), (Scenario, "validation"), (Problem, "validation")],
+        [(JobRequest, "validation"), (Scenario, "validation"), (Problem, "validation"),
+         (SweepRequest, "validation"), (Sweep, "validation")],
         ref_template="#/components/schemas/{model}")
     components.update(defs["$defs"])
     problem_ref = {"$ref": "#/components/schemas/Problem"}

@@ -57,6 +57,9 @@ class Settings(BaseSettings):
     max_steps: int = Field(default=10_000_000, ge=1)
     max_trajectory_bytes: int = Field(default=8 * GiB, ge=1)
     max_memory_bytes: int = Field(default=8 * GiB, ge=1)
+    max_sweep_runs: int = Field(default=100_000, ge=1, description="Runs per sweep.")
+    max_sweep_agent_steps: int = Field(default=10**12, ge=1,
+                                       description="Agents x steps summed over a sweep's runs.")
     max_json_bytes: int = Field(default=32 * MiB, ge=1024,
                                 description="Largest trajectory slice served as JSON.")
     job_timeout_seconds: float = Field(default=3600.0, gt=0,
@@ -100,7 +103,9 @@ class Settings(BaseSettings):
         return Limits(max_agents=self.max_agents, max_steps=self.max_steps,
                       max_trajectory_bytes=self.max_trajectory_bytes,
                       max_memory_bytes=self.max_memory_bytes,
-                      max_observable_rows=self.max_observable_rows)
+                      max_observable_rows=self.max_observable_rows,
+                      max_sweep_runs=self.max_sweep_runs,
+                      max_sweep_agent_steps=self.max_sweep_agent_steps)
 
     def supervisor_config(self) -> SupervisorConfig:
         threads = self.threads_per_worker or max(1, available_cpus() // self.workers)

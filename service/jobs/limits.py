@@ -31,7 +31,9 @@ MAX_STEP_RADII = 10.0
 
 @dataclass(frozen=True)
 class Limits:
-    """Per-job maxima; all are checked, the first violated ones are reported by field."""
+    """Per-job maxima; all are checked, the first violated ones are reported by field.
+    A sweep's every run is held to them, and the sweep as a whole to the `max_sweep_*`
+    ones (see `sweep_limits`)."""
 
     max_agents: int
     max_steps: int
@@ -39,6 +41,8 @@ class Limits:
     max_memory_bytes: int
     # Rows of the observables time series (CSV, /metrics): steps / observables_every.
     max_observable_rows: int = 1_000_000
+    max_sweep_runs: int = 100_000
+    max_sweep_agent_steps: int = 10**12
 
     def to_dict(self) -> dict[str, int]:
         return asdict(self)

@@ -6,6 +6,9 @@ Layout under the results root:
     .attempts/<job-uuid>.<token>/   one attempt's output, written by a worker
     .attempts/.<job-uuid>.<token>.partial-*/   the same while the run writes it (renamed
                                 the attempt folder when complete; left behind by a kill)
+A sweep's committed folder holds the sweep runner's output instead (sweep.json, runs.csv,
+table.csv, series.csv, runs/<i>/). A sweep's attempt folder outlives a lost attempt: the
+next attempt adopts it and the runner skips the runs already finished there.
 A path is only ever built from a UUID the server generated and parsed back as a UUID,
 then resolved and checked to lie under the root; client-supplied names never reach here.
 """
@@ -16,9 +19,11 @@ import hashlib
 import os
 import shutil
 import uuid
+from collections.abc import Collection
 from pathlib import Path
 
 RESULT_FILES = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5")
+SWEEP_FILES = ("sweep.json", "runs.csv", "table.csv", "series.csv")
 
 
 class ResultStore:
@@ -32,7 +37,7 @@ class ResultStore:
         return self._inside(self.root / str(_as_uuid(job_id)))
 
     def file(self, job_id: str | uuid.UUID, name: str) -> Path:
-        if name not in RESULT_FILES:
+        if name not in RESULT_FILES + SWEEP_FILES:
             raise ValueError(f"not a result file: {name!r}")
         return self._inside(self.job_dir(job_id) / name)
 
@@ -40,6 +45,23 @@ class ResultStore:
         if not token.isalnum():
             raise ValueError("attempt tokens are hex strings")
         return self._inside(self.attempts / f"{_as_uuid(job_id)}.{token}")
+
+    def adopt_attempt(self, job_id: str, token: str) -> Path:
+        """Give a new attempt the folder of the job's latest earlier attempt, if any.
+
+        Used for sweeps: the finished runs of a lost attempt are not redone. The rename is
+        atomic, and only the supervisor thread calls it (before the worker is told to run).
+        """
+        dst = self.attempt_dir(job_id, token)
+        earlier = [p for p in self.attempts.glob(f"{_as_uuid(job_id)}.*")
+                   if p.is_dir() and p != dst]
+        if earlier and not dst.exists():
+            newest = max(earlier, key=lambda p: p.stat().st_mtime)
+            os.replace(newest, dst)
+            for p in earlier:
+                if p != newest:
+                    shutil.rmtree(p, ignore_errors=True)
+        return dst
 
     def commit(self, job_id: str, token: str) -> bool:
         """Move an attempt's output into place; False when the attempt wrote nothing.
@@ -68,9 +90,12 @@ class ResultStore:
     def delete(self, job_id: str) -> None:
         shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
 
-    def sweep_attempts(self) -> None:
-        """Delete every attempt folder; called at start-up, when no attempt is running."""
+    def sweep_attempts(self, keep: Collection[str] = ()) -> None:
+        """Delete every attempt folder but those of the jobs in `keep` (unfinished sweeps,
+        which resume from them); called at start-up, when no attempt is running."""
         for p in self.attempts.iterdir():
+            if p.name.split(".")[0] in keep:
+                continue
             if p.is_dir():
                 shutil.rmtree(p, ignore_errors=True)
             else:
@@ -96,10 +121,10 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def checksums(folder: Path) -> dict[str, str]:
+def checksums(folder: Path, names: tuple[str, ...] = RESULT_FILES) -> dict[str, str]:
     """sha256 of every result file present in `folder` (hex), for download integrity."""
     out = {}
-    for name in RESULT_FILES:
+    for name in names:
         p = folder / name
         if p.is_file():
             h = hashlib.sha256()

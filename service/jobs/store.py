@@ -57,6 +57,18 @@ CREATE TABLE IF NOT EXISTS jobs (
 CREATE INDEX IF NOT EXISTS jobs_by_status ON jobs (status, seq);
 """
 
+# Columns added after the first release, each with a default that describes the rows
+# written before it: a data directory made by an older version still opens (no migration
+# step), its rows reading as plain jobs. Added only when missing (SQLite has no
+# ADD COLUMN IF NOT EXISTS).
+#   kind         'job' (one scenario) or 'sweep' (a parameter sweep: `scenario` holds the
+#                canonical sweep, steps_total its runs, steps_done the runs that ended)
+#   runs_failed  a sweep's runs that ended without measures so far (diverged)
+_ADDED_COLUMNS = {
+    "kind": "TEXT NOT NULL DEFAULT 'job'",
+    "runs_failed": "INTEGER NOT NULL DEFAULT 0",
+}
+
 
 class QueueFull(Exception):
     """The queue already holds the configured maximum of waiting jobs."""
@@ -102,6 +114,8 @@ class Job:
     has_results: int
     results_expired: int
     checksums: str | None
+    kind: str = "job"
+    runs_failed: int = 0
 
     @property
     def terminal(self) -> bool:
@@ -123,6 +137,7 @@ class NewJob:
     timeout_seconds: float
     request_hash: str
     idempotency_key: str | None = None
+    kind: str = "job"
 
 
 class JobStore:
@@ -139,6 +154,15 @@ class JobStore:
         self._db.execute("PRAGMA synchronous=FULL")
         self._db.execute("PRAGMA busy_timeout=10000")
         self._db.executescript(_SCHEMA)
+        self._add_missing_columns()
+
+    def _add_missing_columns(self) -> None:
+        with self._tx() as db:
+            have = {r["name"] for r in db.execute("PRAGMA table_info(jobs)")}
+            for name, ddl in _ADDED_COLUMNS.items():
+                if name not in have:
+                    db.execute(f"ALTER TABLE jobs ADD COLUMN {name} {ddl}")
+            db.execute("CREATE INDEX IF NOT EXISTS jobs_by_kind ON jobs (kind, seq)")
 
     def close(self) -> None:
         with self._lock:
@@ -184,10 +208,11 @@ class JobStore:
             job_id = str(uuid.uuid4())
             db.execute(
                 "INSERT INTO jobs (id, status, scenario, model_kind, n_agents, steps_total,"
-                " timeout_seconds, idempotency_key, request_hash, created_at)"
-                " VALUES (?, 'queued', ?, ?, ?, ?, ?, ?, ?, ?)",
+                " timeout_seconds, idempotency_key, request_hash, created_at, kind)"
+                " VALUES (?, 'queued', ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (job_id, new.scenario, new.model_kind, new.n_agents, new.steps_total,
-                 new.timeout_seconds, new.idempotency_key, new.request_hash, time.time()),
+                 new.timeout_seconds, new.idempotency_key, new.request_hash, time.time(),
+                 new.kind),
             )
             row = db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return Job(**row), True
@@ -204,9 +229,11 @@ class JobStore:
         model_kind: str | None = None,
         before_seq: int | None = None,
         limit: int = 50,
+        kind: str = "job",
     ) -> list[Job]:
-        """Newest first; `before_seq` pages backwards from a previous page's last job."""
-        where, args = [], []
+        """Newest first; `before_seq` pages backwards from a previous page's last job.
+        Jobs and sweeps are listed apart (`kind`)."""
+        where, args = ["kind = ?"], [kind]
         statuses = list(statuses)
         if statuses:
             where.append(f"status IN ({', '.join('?' * len(statuses))})")
@@ -217,9 +244,7 @@ class JobStore:
         if before_seq is not None:
             where.append("seq < ?")
             args.append(before_seq)
-        sql = "SELECT * FROM jobs"
-        if where:
-            sql += " WHERE " + " AND ".join(where)
+        sql = "SELECT * FROM jobs WHERE " + " AND ".join(where)
         sql += " ORDER BY seq DESC LIMIT ?"
         args.append(limit)
         with self._lock:
@@ -264,12 +289,13 @@ class JobStore:
                 (time.time() + lease_seconds, owner, *tokens),
             )
 
-    def set_progress(self, job_id: str, token: str, steps_done: int) -> None:
+    def set_progress(self, job_id: str, token: str, steps_done: int,
+                     runs_failed: int | None = None) -> None:
         with self._tx() as db:
             db.execute(
-                "UPDATE jobs SET steps_done = ? WHERE id = ? AND status = 'running'"
-                " AND lease_token = ?",
-                (steps_done, job_id, token),
+                "UPDATE jobs SET steps_done = ?, runs_failed = COALESCE(?, runs_failed)"
+                " WHERE id = ? AND status = 'running' AND lease_token = ?",
+                (steps_done, runs_failed, job_id, token),
             )
 
     def finish(
@@ -283,6 +309,7 @@ class JobStore:
         has_results: bool = False,
         checksums: dict[str, str] | None = None,
         steps_done: int | None = None,
+        runs_failed: int | None = None,
     ) -> bool:
         """Make a running attempt terminal. False when the lease is no longer held."""
         assert status in TERMINAL
@@ -290,10 +317,11 @@ class JobStore:
             cur = db.execute(
                 "UPDATE jobs SET status = ?, finished_at = ?, error = ?, backend = ?,"
                 " has_results = ?, checksums = ?, steps_done = COALESCE(?, steps_done),"
+                " runs_failed = COALESCE(?, runs_failed),"
                 " lease_owner = NULL, lease_token = NULL, lease_expires = NULL"
                 " WHERE id = ? AND status = 'running' AND lease_token = ?",
                 (status, time.time(), _dump(error), backend, int(has_results),
-                 _dump(checksums), steps_done, job_id, token),
+                 _dump(checksums), steps_done, runs_failed, job_id, token),
             )
         return cur.rowcount == 1
 
@@ -331,6 +359,15 @@ class JobStore:
             )
             row = db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return Job(**row) if row else None
+
+    def unfinished_ids(self, kind: str) -> set[str]:
+        """Ids of the queued and running rows of a kind (a sweep's partial output is kept
+        for them across restarts)."""
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT id FROM jobs WHERE kind = ? AND status IN ('queued', 'running')",
+                (kind,)).fetchall()
+        return {r["id"] for r in rows}
 
     def running(self) -> list[Job]:
         with self._lock:

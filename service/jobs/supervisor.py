@@ -72,6 +72,8 @@ class _Attempt:
     progress_saved: float = 0.0
     stop_reason: str | None = None  # "cancel" | "timeout"
     kill_at: float | None = None
+    kind: str = "job"  # "sweep": steps_done counts the runs that ended
+    runs_failed: int | None = None
 
 
 @dataclass
@@ -148,7 +150,7 @@ class Supervisor:
     # -- the loop -----------------------------------------------------------------------
 
     def _run(self) -> None:
-        self.results.sweep_attempts()
+        self.results.sweep_attempts(keep=self.store.unfinished_ids("sweep"))
         self._reap(startup=True)
         while not self._stopping.is_set():
             try:
@@ -227,10 +229,12 @@ class Supervisor:
         elif kind == "progress" and w.attempt and msg[1] == w.attempt.token:
             a = w.attempt
             a.steps_done = msg[2]
+            if len(msg) > 4:  # a sweep's progress also counts its failed runs
+                a.runs_failed = msg[4]
             now = time.monotonic()
             if now - a.progress_saved >= PROGRESS_WRITE_INTERVAL:
                 a.progress_saved = now
-                self.store.set_progress(a.job_id, a.token, a.steps_done)
+                self.store.set_progress(a.job_id, a.token, a.steps_done, a.runs_failed)
                 self.on_change(a.job_id)
         elif kind == "result" and w.attempt and msg[1] == w.attempt.token:
             outcome = msg[2]
@@ -266,11 +270,14 @@ class Supervisor:
         a = w.attempt
         if a is None:
             return
-        self.results.discard_attempt(a.job_id, a.token)
+        job = self.store.get(a.job_id)
+        retried = (a.stop_reason is None and job is not None and not job.cancel_requested
+                   and job.attempts < self.config.max_attempts)
+        if not (retried and a.kind == "sweep"):  # a sweep's retry resumes from its runs
+            self.results.discard_attempt(a.job_id, a.token)
         if a.stop_reason is not None:
             self._finish_stopped(a)
             return
-        job = self.store.get(a.job_id)
         if job is not None and job.cancel_requested:
             # Cancelled before the supervisor could pass the request on: never re-run it.
             self.store.finish(a.job_id, a.token, "cancelled", steps_done=a.steps_done)
@@ -319,12 +326,16 @@ class Supervisor:
         w.cancel_flag.value = 0
         w.attempt = _Attempt(job_id=job.id, token=job.lease_token,
                              deadline=time.monotonic() + job.timeout_seconds,
-                             timeout_seconds=job.timeout_seconds)
+                             timeout_seconds=job.timeout_seconds, kind=job.kind)
+        # A sweep's attempt continues in the folder of its lost predecessor, if any.
+        out_dir = (self.results.adopt_attempt(job.id, job.lease_token) if job.kind == "sweep"
+                   else self.results.attempt_dir(job.id, job.lease_token))
         order = {
             "job_id": job.id,
+            "kind": job.kind,
             "token": job.lease_token,
             "scenario": job.scenario,
-            "out_dir": str(self.results.attempt_dir(job.id, job.lease_token)),
+            "out_dir": str(out_dir),
             "limits": self.config.limits.to_dict(),
             "threads": self.config.threads_per_worker,
         }
@@ -349,9 +360,10 @@ class Supervisor:
         summary = outcome["summary"]
         status, error = _job_status(summary, a)
         has_results = self.results.commit(a.job_id, a.token)
+        done = summary.get("runs_ended" if a.kind == "sweep" else "steps", a.steps_done)
         self.store.finish(a.job_id, a.token, status, error=error, backend=summary.get("backend"),
                           has_results=has_results, checksums=outcome.get("checksums"),
-                          steps_done=summary.get("steps", a.steps_done))
+                          steps_done=done, runs_failed=summary.get("runs_failed"))
         self.on_change(a.job_id)
 
     def _finish_stopped(self, a: _Attempt) -> None:
@@ -442,8 +454,9 @@ class Supervisor:
                 w.process.kill()
                 w.process.join(1.0)
             w.conn.close()
-            if w.attempt is not None:
-                # The killed run's partial output; the job re-runs from scratch.
+            if w.attempt is not None and w.attempt.kind != "sweep":
+                # The killed run's partial output: the job re-runs from scratch (a sweep
+                # keeps its folder, which its next attempt adopts to skip finished runs).
                 self.results.discard_attempt(w.attempt.job_id, w.attempt.token)
         self._workers.clear()
 

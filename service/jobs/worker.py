@@ -6,6 +6,7 @@ forked after `ti.init` hangs, taichi#6725). It talks to the supervisor over a pi
     supervisor -> worker   ("run", order)  |  ("stop",)
     worker -> supervisor   ("ready", pid)
                            ("progress", token, steps_done, steps_total)
+                           ("progress", token, runs_ended, runs_total, runs_failed)  (sweeps)
                            ("result", token, {"summary", "checksums", "rss"}
                                            | {"problem", "rss"})
 
@@ -66,7 +67,12 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
         def should_stop() -> bool:
             return cancel_flag.value != 0 or orphaned()
 
-        outcome = _run_order(execute_to_dir, order, on_progress, should_stop)
+        if order.get("kind") == "sweep":
+            from .sweep_worker import run_sweep_order
+
+            outcome = run_sweep_order(order, conn, should_stop)
+        else:
+            outcome = _run_order(execute_to_dir, order, on_progress, should_stop)
         outcome["rss"] = _rss_bytes()
         try:
             conn.send(("result", token, outcome))

@@ -1,0 +1,132 @@
+"""The small-N path's driver: window after window of one fused launch per batch.
+
+A batch (e.g. `VicsekBatch`) holds many replicas' state on the device and advances all of
+them through a window of steps in one launch, writing the observables into a buffer. The
+driver only picks the windows: each ends at the next frame to record, or after about
+`WINDOW_AGENT_STEPS` agent-steps, so progress and cancellation are polled a few times a
+second. Window boundaries never change a bit of any replica.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
+
+import numpy as np
+
+from schemas import Scenario
+
+from .result import FrameSink, RunResult
+
+WINDOW_AGENT_STEPS = 2_000_000  # about 0.1-0.3 s of work between host visits
+
+
+class Batch(Protocol):
+    """What a model's fused batch offers the driver (see kernels/vicsek_fused.py)."""
+
+    scenarios: list[Scenario]
+
+    def advance(self, s0: int, s1: int) -> None: ...
+    def end_at(self, step: int) -> None: ...
+    def status(self) -> np.ndarray: ...
+    def observables(self, b: int, status: np.ndarray) -> dict[str, np.ndarray]: ...
+    def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]: ...
+    def convergence_keys(self) -> list[str]: ...
+    def extra(self, b: int, status: np.ndarray) -> dict[str, Any]: ...
+    def divergence(self, b: int, status: np.ndarray) -> tuple[int, str, str] | None: ...
+
+
+def run_batch(
+    make: Callable[[list[Scenario]], Batch],
+    scenarios: Sequence[Scenario],
+    *,
+    backend: str,
+    sinks: Sequence[FrameSink | None] | None = None,
+    on_progress: Callable[[int, int], None] | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    progress_interval: float = 0.2,
+) -> list[RunResult]:
+    """Run `scenarios` (one batch key) to the end, to cancellation or to blow-up."""
+    from .engine import time_to_converge
+
+    t0 = time.perf_counter()
+    batch = make(list(scenarios))
+    setup = time.perf_counter() - t0
+    sinks = list(sinks) if sinks is not None else [None] * len(scenarios)
+    steps = [s.time.steps for s in scenarios]
+    last = max(steps)
+    agents = sum(s.n_agents for s in scenarios)
+    window = max(1, WINDOW_AGENT_STEPS // max(agents, 1))
+    frame_every = [s.recording.every if s.recording.enabled and sinks[b] is not None else 0
+                   for b, s in enumerate(scenarios)]
+    arrays = [[a for a in s.recording.arrays if a in type(s.model).state_arrays]
+              for s in scenarios]
+
+    def record(step: int, status: np.ndarray | None, last: bool = False) -> None:
+        """Frames due at `step` (every k steps and at each replica's end; `last`: the
+        stopping step of a cancelled run, unless its frame is already there)."""
+        for b, sink in enumerate(sinks):
+            k = frame_every[b]
+            if not k or not arrays[b] or step > steps[b]:
+                continue
+            due = step == steps[b] or (step % k != 0 if last else step % k == 0)
+            if due and (status is None or batch.divergence(b, status) is None):
+                sink.frame(step, step * scenarios[b].time.dt, batch.frame(b, arrays[b]))
+
+    record(0, None)
+    s, cancelled, last_progress = 0, False, time.perf_counter()
+    while s <= last:
+        nxt = min(s + window, last + 1)
+        for b, k in enumerate(frame_every):  # stop at the next frame to record
+            if k and s < steps[b]:
+                nxt = min(nxt, (s // k + 1) * k, steps[b])
+        batch.advance(s, nxt)
+        s = nxt
+        if any(frame_every):
+            record(s, batch.status())
+        if s > last:
+            break
+        now = time.perf_counter()
+        if on_progress is not None and now - last_progress >= progress_interval:
+            last_progress = now
+            on_progress(min(s, last), last)
+        if should_stop is not None and should_stop():
+            cancelled = True
+            batch.end_at(s)
+            batch.advance(s, s + 1)  # the final observation at the stopping step
+            if any(frame_every):
+                record(s, batch.status(), last=True)
+            break
+    status = batch.status()
+    wall = time.perf_counter() - t0
+    results = []
+    for b, sc in enumerate(scenarios):
+        obs = batch.observables(b, status)
+        obs = {"step": obs["step"], "time": obs["step"] * sc.time.dt,
+               **{k: v for k, v in obs.items() if k != "step"}}
+        div = batch.divergence(b, status)
+        done = min(s, steps[b]) if div is None else div[0]
+        error = None
+        if div is not None:
+            step, quantity, cause = div
+            error = {"step": step, "time": step * sc.time.dt, "quantity": quantity,
+                     "cause": cause,
+                     "message": f"step {step}: non-finite or runaway {quantity}; "
+                                f"likely cause: {cause}"}
+        state = "diverged" if div is not None else "cancelled" if cancelled and (
+            done < steps[b]) else "completed"
+        final = {k: float(v[-1]) for k, v in obs.items() if len(v)}
+        tol = sc.convergence.tolerance
+        convergence = {k: time_to_converge(obs["time"], obs[k], tol)
+                       for k in batch.convergence_keys() if k in obs}
+        results.append(RunResult(
+            status=state, backend=backend, steps=done, wall_seconds=wall,
+            n_agents=sc.n_agents, observables=obs, final=final, convergence=convergence,
+            extra={"setup_seconds": setup, "engine_path": "fused",
+                   **batch.extra(b, status)},
+            error=error,
+        ))
+    if on_progress is not None and len(scenarios) == 1:
+        on_progress(results[0].steps, steps[0])
+    return results

@@ -1,0 +1,599 @@
+"""M1 on the small-N path: many steps of many replicas in one kernel launch.
+
+The rule is the one `kernels/vicsek.py` documents (paper 001, eq. 1-2, 17-18, 22; Vicsek
+et al. 1995); only the schedule differs. At small N a step costs microseconds of arithmetic
+but milliseconds of launches and host round trips, so here one launch advances every
+replica of a batch through a whole window of steps: replicas run in parallel (one per
+CPU task), each replica's steps and agents serially inside, the state never leaves the
+kernel's arrays, and the observables go into a per-replica buffer row by row. The host
+comes back only at frame, progress and cancellation points, which never changes a bit:
+a replica computes the same numbers alone, in a batch, or cut into any windows.
+
+Per replica and step s (state X(s) in agent-id order):
+  1. a cell list of X(s): cells of side >= r (a hair wider), counted, scanned and filled
+     in id order (so every neighbour sum has one fixed order); the periodic box uses
+     floor(L / r) cells across, the plane a grid over the bounding box; fewer than three
+     cells across, or N <= ALL_PAIRS_N, visits all pairs instead;
+  2. the closed-neighbourhood sums of the rule over the 3x3 block (minimum image), the
+     new heading with its noise xi = eta (u - 1/2), u = hash(seed, step, id), and the move;
+     on an observation step the same visit gives the degrees and the components;
+  3. commit X(s+1). A non-finite value stops the replica and records the step.
+"""
+
+
+from functools import cache
+from typing import Any
+
+import numpy as np
+import taichi as ti
+
+from schemas import PeriodicBox, Scenario, VicsekParams
+
+from . import rng
+
+nd = ti.types.ndarray()
+RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
+ALL_PAIRS_N = 48  # at or below this N every pair is tested (fewer operations than cells)
+_WIDEN = 1.0 + 1e-9  # cells a hair wider than r: rounding can never hide a neighbour
+SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
+TWO_PI = 2 * np.pi
+
+# Per-replica parameter slots: prm (f64) and iprm (i32).
+R2, V0DT, ETA, G, L, THETA0, RADIUS = range(7)
+N_PRM = 8
+STEPS, EVERY, TRACK, NOBS, BAD, LINKED, LONGEST, OPEN, CAUSE, MOVE_NEW = range(10)
+N_IPRM = 10
+# Why a replica stopped (iprm[CAUSE]), as the per-step path words it.
+CAUSES = (
+    ("heading/position",
+     "non-finite input (v0 * dt or the initial state too large for float64)"),
+    ("position", "the swarm spans over 2^30 neighbour radii (agents escaping: dt too large "
+                 "or forces unbounded), or a position became non-finite"),
+)
+MAX_CELLS_ACROSS = 2.0**30  # as kernels/grid.py: beyond it the swarm has run away
+# Observable columns, in the order the per-step path reports them.
+OBS = ("step", "polarization", "heading_spread", "leader_error", "components",
+       "degree_mean", "degree_min", "degree_max", "isolated", "linked_intervals")
+N_OBS = len(OBS)
+
+
+@ti.func
+def _find(parent: ti.template(), x):
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]  # path halving
+        x = parent[x]
+    return x
+
+
+@ti.func
+def _union(parent: ti.template(), u, v):
+    ru = _find(parent, u)
+    rv = _find(parent, v)
+    if ru != rv:
+        parent[ti.max(ru, rv)] = ti.min(ru, rv)
+
+
+@ti.func
+def _key(kseed, step):
+    """rng.step_key(seed, 0, step), with the seed's part precomputed on the host."""
+    return rng._mix(kseed ^ rng._mix(ti.cast(step, ti.u32)))
+
+
+@cache
+def advance_kernel(rule: int, periodic: bool):
+    """The window kernel for one rule and geometry (compile-time specialised)."""
+    vicsek = rule == RULES["vicsek"]
+
+    @ti.func
+    def build_cells(a0, n, c0, cap, Lb, r, pos: ti.template(), cell: ti.template(),
+                    cstart: ti.template(), cidx: ti.template()):
+        """Cell list of the replica's agents: cidx[a0 + k] is the agent in slot k, slots in
+        cell order and, within a cell, in id order (a stable counting sort), and cell c
+        holds slots cstart[c0 + c] .. cstart[c0 + c + 1]. Returns the cells across
+        (nx, ny); nx = 0: no grid, visit all pairs."""
+        nx = 0
+        ny = 0
+        w = r * _WIDEN
+        ox = 0.0
+        oy = 0.0
+        if n > ALL_PAIRS_N:
+            if ti.static(periodic):
+                nc = ti.min(ti.cast(ti.floor(Lb / w), ti.i32), ti.cast(ti.sqrt(cap), ti.i32))
+                if nc >= 3:  # fewer: the 3x3 block would meet a cell twice
+                    nx = nc
+                    ny = nc
+                    w = Lb / nc
+            else:
+                lo = ti.math.vec2(ti.math.inf)
+                hi = ti.math.vec2(-ti.math.inf)
+                for i in range(a0, a0 + n):
+                    p = ti.math.vec2(pos[i, 0], pos[i, 1])
+                    lo = ti.min(lo, p)
+                    hi = ti.max(hi, p)
+                ext = hi - lo
+                if not (ti.max(ext[0], ext[1]) < MAX_CELLS_ACROSS * w):  # NaN included
+                    nx = -1  # runaway: the caller stops the replica
+                # Widen the cells until the grid fits the replica's cell budget (a swarm
+                # spread over 10^6 radii then shares a few large cells: slower, never wrong).
+                if nx == 0:
+                    while (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
+                        w *= 2.0
+                    nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
+                    ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
+                    ox = lo[0]
+                    oy = lo[1]
+                    if nx < 3 and ny < 3:
+                        nx = 0
+        if nx > 0:
+            for c in range(c0, c0 + nx * ny + 1):
+                cstart[c] = 0
+            for i in range(a0, a0 + n):
+                cx = ti.min(ti.cast(ti.floor((pos[i, 0] - ox) / w), ti.i32), nx - 1)
+                cy = ti.min(ti.cast(ti.floor((pos[i, 1] - oy) / w), ti.i32), ny - 1)
+                cc = ti.max(cx, 0) + nx * ti.max(cy, 0)
+                cell[i] = cc
+                cstart[c0 + cc + 1] += 1
+            for c in range(c0 + 1, c0 + nx * ny + 1):
+                cstart[c] += cstart[c - 1]
+            for i in range(a0, a0 + n):  # cstart[c] as the fill pointer of cell c
+                slot = c0 + cell[i]
+                k = cstart[slot]
+                cidx[a0 + k] = i
+                cstart[slot] = k + 1
+            for m in range(nx * ny):  # shift back: start[c] = end[c - 1], from the top
+                c = c0 + nx * ny - m
+                cstart[c] = cstart[c - 1]
+            cstart[c0] = 0
+        elif nx == 0:
+            for k in range(n):
+                cidx[a0 + k] = a0 + k
+        return ti.math.ivec2(nx, ny)
+
+    @ti.func
+    def add(k, m, d, a, r2, links: ti.template(), ps: ti.template(), cidx: ti.template(),
+            parent: ti.template(), parent_u: ti.template(), graph, track):
+        """Slot m's term in slot k's closed-neighbourhood sum when |d| is within r. Sums
+        stay in registers: a store per pair (a symmetric half visit) cost 8x more, and
+        the visit without links has no store at all (a store in the loop makes every
+        array access reload its base and shape)."""
+        # r2 is the strict threshold: r^2 itself for "<", the next double above it for
+        # "<=" (no double lies between), so one compiled test serves both.
+        w = ti.cast(d.dot(d) < r2, ti.f64)  # branch-free: 1 or 0
+        if ti.static(links):
+            if w > 0.0 and m > k:  # each edge once
+                if graph:
+                    _union(parent, cidx[k], cidx[m])
+                if track:
+                    _union(parent_u, cidx[k], cidx[m])
+        return a + w * ti.math.vec3(ps[m, 2], ps[m, 3], 1.0)
+
+    @ti.func
+    def run(k, lo, hi, sx, sy, a, r2, links: ti.template(), ps: ti.template(),
+            cidx: ti.template(), parent: ti.template(), parent_u: ti.template(), graph,
+            track):
+        """Slots lo .. hi, whose periodic image beside slot k is r_m + (sx, sy):
+        d = r_m - (r_k - s)."""
+        xs = ti.math.vec2(ps[k, 0] - sx, ps[k, 1] - sy)
+        for m in range(lo, hi):
+            d = ti.math.vec2(ps[m, 0] - xs[0], ps[m, 1] - xs[1])
+            a = add(k, m, d, a, r2, links, ps, cidx, parent, parent_u, graph, track)
+        return a
+
+    @ti.func
+    def sums(k, a0, n, c0, nx, ny, Lb, r2, links: ti.template(), graph, track,
+             ps: ti.template(),
+             cell: ti.template(), cstart: ti.template(), cidx: ti.template(),
+             parent: ti.template(), parent_u: ti.template()):
+        """(sum of the terms, 0, count) over slot k's closed neighbourhood: every slot
+        (minimum image) without a grid, else the 3x3 block of cells around it, read as
+        three contiguous rows of slots away from the seams; periodic images are shifted
+        by +-L per cell or row, never tested per pair."""
+        a = ti.math.vec3(0.0)
+        if nx == 0:
+            for m in range(a0, a0 + n):
+                d = ti.math.vec2(ps[m, 0] - ps[k, 0], ps[m, 1] - ps[k, 1])
+                if ti.static(periodic):
+                    d -= Lb * ti.round(d / Lb)
+                a = add(k, m, d, a, r2, links, ps, cidx, parent, parent_u, graph, track)
+        else:
+            cc = cell[cidx[k]]
+            cx = cc % nx
+            cy = cc // nx
+            for dy in ti.static(range(-1, 2)):
+                qy = cy + dy
+                sy = 0.0
+                row_ok = 1
+                if ti.static(periodic):
+                    if qy < 0:
+                        qy += ny
+                        sy = -Lb
+                    elif qy >= ny:
+                        qy -= ny
+                        sy = Lb
+                else:
+                    row_ok = ti.cast(qy >= 0 and qy < ny, ti.i32)
+                if row_ok:
+                    row = c0 + nx * qy
+                    if cx >= 1 and cx + 1 < nx:  # three cells, contiguous slots: one run
+                        a = run(k, a0 + cstart[row + cx - 1], a0 + cstart[row + cx + 2],
+                                0.0, sy, a, r2, links, ps, cidx, parent, parent_u, graph,
+                                track)
+                    else:  # at a seam or an edge: cell by cell
+                        for dx in ti.static(range(-1, 2)):
+                            qx = cx + dx
+                            sx = 0.0
+                            ok = 1
+                            if ti.static(periodic):
+                                if qx < 0:
+                                    qx += nx
+                                    sx = -Lb
+                                elif qx >= nx:
+                                    qx -= nx
+                                    sx = Lb
+                            else:
+                                ok = ti.cast(qx >= 0 and qx < nx, ti.i32)
+                            if ok:
+                                a = run(k, a0 + cstart[row + qx], a0 + cstart[row + qx + 1],
+                                        sx, sy, a, r2, links, ps, cidx, parent, parent_u,
+                                        graph, track)
+        return a
+
+    @ti.func
+    def heading_vector(ps: ti.template(), k):
+        """e(theta) of slot k: stored (vicsek rule) or from the angle (JLM rules)."""
+        e = ti.math.vec2(ps[k, 2], ps[k, 3])
+        if ti.static(not vicsek):
+            e = ti.math.vec2(ti.cos(ps[k, 2]), ti.sin(ps[k, 2]))
+        return e
+
+    @ti.func
+    def circular_spread(a0, n, ps: ti.template(), lo: ti.template(), hi: ti.template()):
+        """2 pi minus the largest gap between headings on the circle, with n buckets (the
+        largest gap is between buckets, by pigeonhole): exact, O(n)."""
+        res = 0.0
+        if n >= 2:
+            for k in range(a0, a0 + n):
+                lo[k] = ti.math.inf
+                hi[k] = -ti.math.inf
+            for i in range(a0, a0 + n):
+                th = ti.atan2(ps[i, 3], ps[i, 2])
+                a = th - TWO_PI * ti.floor(th / TWO_PI)
+                if a >= TWO_PI:
+                    a -= TWO_PI
+                k = a0 + ti.min(ti.cast(a / TWO_PI * n, ti.i32), n - 1)
+                lo[k] = ti.min(lo[k], a)
+                hi[k] = ti.max(hi[k], a)
+            first = ti.math.inf
+            last = -ti.math.inf
+            gap = 0.0
+            for k in range(a0, a0 + n):
+                if lo[k] <= hi[k]:
+                    if last > -ti.math.inf:
+                        gap = ti.max(gap, lo[k] - last)
+                    else:
+                        first = lo[k]
+                    last = hi[k]
+            res = TWO_PI - ti.max(gap, first + TWO_PI - last)
+        return res
+
+    @ti.func
+    def observe(b, a0, n, s, row, ps: ti.template(), parent: ti.template(),
+                deg: ti.template(), arc_lo: ti.template(),
+                arc_hi: ti.template(), prm: ti.template(), iprm: ti.template(),
+                obs: ti.template()):
+        """Observables of X(s) (ps: slot order) into obs[row]: the columns of OBS."""
+        sx = 0.0
+        sy = 0.0
+        for k in range(a0, a0 + n):
+            e = heading_vector(ps, k)
+            sx += e[0]
+            sy += e[1]
+        obs[row, 0] = s
+        obs[row, 1] = ti.sqrt(sx * sx + sy * sy) / n
+        spread = 0.0
+        if ti.static(vicsek):
+            spread = circular_spread(a0, n, ps, arc_lo, arc_hi)
+        else:
+            lo = ti.math.inf
+            hi = -ti.math.inf
+            for k in range(a0, a0 + n):
+                lo = ti.min(lo, ps[k, 2])
+                hi = ti.max(hi, ps[k, 2])
+            spread = hi - lo
+        obs[row, 2] = spread
+        if ti.static(rule == RULES["leader"]):
+            err = 0.0
+            for k in range(a0, a0 + n):
+                err = ti.max(err, ti.abs(ps[k, 2] - prm[b, THETA0]))
+            obs[row, 3] = err
+        roots = 0
+        dsum = 0
+        dmin = 2**30
+        dmax = 0
+        iso = 0
+        for k in range(a0, a0 + n):
+            if parent[k] == k:  # parent is indexed by agent, deg by slot: both whole sets
+                roots += 1
+            dsum += deg[k]
+            dmin = ti.min(dmin, deg[k])
+            dmax = ti.max(dmax, deg[k])
+            if deg[k] == 0:
+                iso += 1
+        obs[row, 4] = roots
+        obs[row, 5] = ti.cast(dsum, ti.f64) / n
+        obs[row, 6] = dmin
+        obs[row, 7] = dmax
+        obs[row, 8] = iso
+        obs[row, 9] = iprm[b, LINKED]
+
+    @ti.func
+    def close_linked(b, a0, n, s, parent_u: ti.template(), iprm: ti.template()):
+        """Theorem 2: once the union of G(open) .. G(s) is connected, an interval of
+        "linked together" graphs closes at s + 1 and the next one opens there."""
+        roots = 0
+        for i in range(a0, a0 + n):
+            if parent_u[i] == i:
+                roots += 1
+        if roots == 1:
+            iprm[b, LINKED] += 1
+            iprm[b, LONGEST] = ti.max(iprm[b, LONGEST], s + 1 - iprm[b, OPEN])
+            iprm[b, OPEN] = s + 1
+            for i in range(a0, a0 + n):
+                parent_u[i] = i
+
+    @ti.func
+    def update(b, i, k, s, a0, acc, Lb, prm: ti.template(), iprm: ti.template(),
+               kseed: ti.template(), ps: ti.template(), pos: ti.template(), ew: ti.template(),
+               theta: ti.template()):
+        """Agent i (slot k) from its closed-neighbourhood sums to X(s + 1); 1 if the
+        result is not finite."""
+        th = ps[k, 2]
+        new = th
+        e_new = ti.math.vec2(1.0, 0.0)
+        if ti.static(vicsek):
+            nrm = ti.sqrt(acc[0] * acc[0] + acc[1] * acc[1])
+            if nrm > 0.0:  # arg(0) = 0, as atan2(0, 0)
+                e_new = ti.math.vec2(acc[0], acc[1]) / nrm
+        elif ti.static(rule == RULES["laplacian"]):
+            new = th - (acc[2] * th - acc[0]) / prm[b, G]  # eq. 18
+        else:
+            new = acc[0] / acc[2]  # eq. 1-2 (and 22 for the leader)
+        if prm[b, ETA] > 0.0:
+            noise = prm[b, ETA] * (rng.uniform(_key(kseed[b], s), i - a0) - 0.5)
+            if ti.static(vicsek):
+                cn = ti.cos(noise)  # rotate e_new by the noise angle
+                sn = ti.sin(noise)
+                e_new = ti.math.vec2(cn * e_new[0] - sn * e_new[1],
+                                     sn * e_new[0] + cn * e_new[1])
+            else:
+                new += noise
+        if ti.static(rule == RULES["leader"]):
+            if i == a0:
+                new = prm[b, THETA0]
+        if ti.static(not vicsek):
+            e_new = ti.math.vec2(ti.cos(new), ti.sin(new))
+        e = ti.math.vec2(ew[i, 0], ew[i, 1])  # e(theta_i(s))
+        if iprm[b, MOVE_NEW]:
+            e = e_new
+        x = ti.math.vec2(ps[k, 0], ps[k, 1]) + prm[b, V0DT] * e
+        if ti.static(periodic):
+            x -= Lb * ti.floor(x / Lb)
+            for c in ti.static(range(2)):
+                if x[c] >= Lb:  # x - L floor(x / L) can round up to L itself
+                    x[c] -= Lb
+        pos[i, 0] = x[0]
+        pos[i, 1] = x[1]
+        ew[i, 0] = e_new[0]
+        ew[i, 1] = e_new[1]
+        theta[i] = new
+        v = new + x[0] + x[1] + e_new[0]  # NaN if any term is NaN or infinite
+        return ti.cast(ti.math.isnan(v) or ti.math.isinf(v), ti.i32)
+
+    @ti.kernel
+    def advance(s0: ti.i32, s1: ti.i32, aoff: nd, coff: nd, ooff: nd, prm: nd, iprm: nd,
+                kseed: nd, pos: nd, ew: nd, theta: nd, ps: nd, cell: nd, cstart: nd,
+                cidx: nd, parent: nd,
+                parent_u: nd, deg: nd, arc_lo: nd, arc_hi: nd, obs: nd):
+        for t in range((aoff.shape[0] - 1) * SPREAD):
+            if t % SPREAD == 0:  # one replica per CPU task
+                b = t // SPREAD
+                a0 = aoff[b]
+                n = aoff[b + 1] - a0
+                c0 = coff[b]
+                cap = coff[b + 1] - c0 - 1
+                Lb = prm[b, L]
+                r2 = prm[b, R2]
+                steps = iprm[b, STEPS]
+                every = iprm[b, EVERY]
+                track = iprm[b, TRACK] != 0
+                s = s0
+                while s < s1 and s <= steps and iprm[b, BAD] < 0:
+                    graph = s % every == 0 or s == steps  # an observation step
+                    nxy = build_cells(a0, n, c0, cap, Lb, prm[b, RADIUS], pos, cell,
+                                      cstart, cidx)
+                    if nxy[0] < 0:
+                        iprm[b, BAD] = s
+                        iprm[b, CAUSE] = 1
+                        break
+                    for k in range(a0, a0 + n):  # X(s) in slot order: the visit reads it
+                        i = cidx[k]
+                        ps[k, 0] = pos[i, 0]
+                        ps[k, 1] = pos[i, 1]
+                        if ti.static(vicsek):
+                            ps[k, 2] = ew[i, 0]
+                            ps[k, 3] = ew[i, 1]
+                        else:
+                            ps[k, 2] = theta[i]
+                            ps[k, 3] = 0.0
+                        parent[i] = i
+                    nx = nxy[0]
+                    ny = nxy[1]
+                    tracking = track and s < steps
+                    bad = 0
+                    for k in range(a0, a0 + n):
+                        # X(s + 1) is written over X(s) in id order as we go: the visit
+                        # reads only the slot-order copy, so the update stays synchronous.
+                        i = cidx[k]
+                        acc = ti.math.vec3(0.0)
+                        if graph or tracking:  # the components and Theorem 2's forest
+                            acc = sums(k, a0, n, c0, nx, ny, Lb, r2, True, graph, tracking,
+                                       ps, cell, cstart, cidx, parent, parent_u)
+                        else:
+                            acc = sums(k, a0, n, c0, nx, ny, Lb, r2, False, graph, tracking,
+                                       ps, cell, cstart, cidx, parent, parent_u)
+                        deg[k] = ti.cast(acc[2], ti.i32) - 1  # the closed set holds i
+                        if s < steps:
+                            bad |= update(b, i, k, s, a0, acc, Lb, prm, iprm, kseed, ps, pos,
+                                          ew, theta)
+                    if graph:
+                        row = ooff[b] + iprm[b, NOBS]
+                        iprm[b, NOBS] += 1
+                        observe(b, a0, n, s, row, ps, parent, deg, arc_lo, arc_hi, prm, iprm,
+                                obs)
+                    if s < steps:
+                        if track:
+                            close_linked(b, a0, n, s, parent_u, iprm)
+                        if bad != 0:
+                            iprm[b, BAD] = s
+                    s += 1
+
+    return advance
+
+
+class VicsekBatch:
+    """The state of a batch of M1 replicas (any N, L, eta, steps each; one rule and
+    geometry), advanced window by window by `advance_kernel`."""
+
+    def __init__(self, scenarios: list[Scenario]):
+        from .initial import initial_state
+
+        self.scenarios = scenarios
+        first = scenarios[0]
+        p0: VicsekParams = first.model  # type: ignore[assignment]
+        self.rule = p0.rule
+        self.periodic = isinstance(first.space, PeriodicBox)
+        self.kernel = advance_kernel(RULES[p0.rule], self.periodic)
+        ns = [s.n_agents for s in scenarios]
+        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
+        caps = [2 * n + 16 for n in ns]  # cells per replica (the cell budget) + 1
+        self.coff = np.concatenate([[0], np.cumsum(np.add(caps, 1))]).astype(np.int32)
+        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
+        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        total = int(self.aoff[-1])
+        B = len(scenarios)
+        prm = np.zeros((B, N_PRM))
+        iprm = np.zeros((B, N_IPRM), dtype=np.int32)
+        kseed = np.zeros(B, dtype=np.uint32)
+        pos = np.zeros((total, 2))
+        theta = np.zeros(total)
+        self.track = []
+        for b, sc in enumerate(scenarios):
+            p: VicsekParams = sc.model  # type: ignore[assignment]
+            r = sc.neighbours.radius
+            L_ = sc.space.L if self.periodic else 0.0
+            r2 = np.nextafter(r * r, np.inf) if sc.inclusive else r * r
+            prm[b, [R2, V0DT, ETA, G, L, THETA0, RADIUS]] = [
+                r2, p.v0 * sc.time.dt, p.eta, p.g or 1.0, L_, p.leader_heading, r]
+            track = p.track_linked_intervals
+            track = sc.n_agents <= 100_000 if track is None else track
+            self.track.append(track)
+            iprm[b, [STEPS, EVERY, TRACK, BAD, MOVE_NEW]] = [
+                sc.time.steps, sc.recording.observables_every, int(track), -1,
+                int(p.position_update == "new_heading")]
+            kseed[b] = rng.seed_key(sc.seed, 0)
+            init = initial_state(sc)
+            th = init.headings
+            if p.rule == "leader":
+                th[0] = p.leader_heading
+            a0, a1 = self.aoff[b], self.aoff[b + 1]
+            pos[a0:a1] = init.positions
+            theta[a0:a1] = th
+        ew = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+
+        def arr(a: np.ndarray, dtype=ti.f64) -> ti.Ndarray:
+            out = ti.ndarray(dtype, shape=a.shape)
+            out.from_numpy(a)
+            return out
+
+        def scratch(shape, dtype=ti.f64) -> ti.Ndarray:
+            return ti.ndarray(dtype, shape=shape)
+
+        i32 = ti.i32
+        self.iprm_np = iprm
+        self.args = dict(
+            aoff=arr(self.aoff, i32), coff=arr(self.coff, i32), ooff=arr(self.ooff, i32),
+            prm=arr(prm), iprm=arr(iprm, i32), kseed=arr(kseed, ti.u32),
+            pos=arr(pos), ew=arr(ew), theta=arr(theta), ps=scratch((total, 4)),
+            cell=scratch(total, i32), cstart=scratch(int(self.coff[-1]), i32),
+            cidx=scratch(total, i32), parent=scratch(total, i32),
+            parent_u=arr(np.arange(total, dtype=np.int32), i32), deg=scratch(total, i32),
+            arc_lo=scratch(total), arc_hi=scratch(total),
+            obs=arr(np.zeros((int(self.ooff[-1]), N_OBS))),
+        )
+        self._order = list(self.args)
+
+    @property
+    def n_replicas(self) -> int:
+        return len(self.scenarios)
+
+    def advance(self, s0: int, s1: int) -> None:
+        """Advance every replica from step s0 towards s1 (each stops at its own end)."""
+        self.kernel(s0, s1, *(self.args[k] for k in self._order))
+
+    def end_at(self, step: int) -> None:
+        """Make `step` every replica's last (cancellation): the next window observes it."""
+        iprm = self.args["iprm"].to_numpy()
+        iprm[:, STEPS] = np.minimum(iprm[:, STEPS], step)
+        self.args["iprm"].from_numpy(iprm)
+
+    def status(self) -> np.ndarray:
+        """Per-replica integer slots (steps, observation count, divergence step, ...)."""
+        return self.args["iprm"].to_numpy()
+
+    def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
+        o0 = self.ooff[b]
+        rows = self.args["obs"].to_numpy()[o0:o0 + iprm[b, NOBS]]
+        keep = [c for c in OBS if c != "step"]
+        if self.rule != "leader":
+            keep.remove("leader_error")
+        if not self.track[b]:
+            keep.remove("linked_intervals")
+        return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
+
+    def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
+        a0, a1 = self.aoff[b], self.aoff[b + 1]
+        out = {}
+        e = self.args["ew"].to_numpy()[a0:a1]
+        th = (np.arctan2(e[:, 1], e[:, 0]) if self.rule == "vicsek"
+              else self.args["theta"].to_numpy()[a0:a1])
+        if "position" in arrays:
+            out["position"] = self.args["pos"].to_numpy()[a0:a1]
+        if "heading" in arrays:
+            out["heading"] = th
+        if "velocity" in arrays:
+            v0 = self.scenarios[b].model.v0
+            out["velocity"] = v0 * np.stack([np.cos(th), np.sin(th)], axis=1)
+        return out
+
+    def convergence_keys(self) -> list[str]:
+        return ["heading_spread", "leader_error"] if self.rule == "leader" else [
+            "heading_spread"]
+
+    def extra(self, b: int, iprm: np.ndarray) -> dict[str, Any]:
+        if not self.track[b]:
+            return {}
+        return {"linked_intervals": {
+            "count": int(iprm[b, LINKED]), "longest_steps": int(iprm[b, LONGEST]),
+            "open_since_step": int(iprm[b, OPEN])}}
+
+    def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
+        step = int(iprm[b, BAD])
+        if step < 0:
+            return None
+        return (step, *CAUSES[iprm[b, CAUSE]])
+
+    @staticmethod
+    def batch_key(scenario: Scenario) -> tuple | None:
+        """Scenarios with the same key share a launch; None: not for this path."""
+        p: VicsekParams = scenario.model  # type: ignore[assignment]
+        return ("vicsek", p.rule, isinstance(scenario.space, PeriodicBox))

@@ -1,0 +1,62 @@
+"""What the service answers about a sweep, shared with the client (which parses its
+responses into these models)."""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from .problems import Problem
+
+SweepState = Literal["queued", "running", "succeeded", "failed", "cancelled", "timed_out"]
+
+
+class SweepStatus(BaseModel):
+    """A sweep as the API shows it: its runs done, failed and in all, and its results."""
+
+    model_config = ConfigDict(extra="allow", json_schema_extra={"examples": [{
+        "id": "5d0c4a7e-2b1f-4f0e-9c1a-7e3d2b6a8f10", "name": "eta-scan",
+        "status": "running", "progress": 0.25, "runs_done": 6, "runs_failed": 0,
+        "runs_total": 24, "model": "vicsek", "created_at": "2024-05-01T12:00:00Z",
+        "started_at": "2024-05-01T12:00:00.1Z", "finished_at": None, "attempts": 1,
+        "cancel_requested": False, "timeout_seconds": 3600.0, "error": None,
+        "results": "pending", "results_expire_at": None, "checksums": None,
+        "links": {"self": "/v1/sweeps/5d0c4a7e-2b1f-4f0e-9c1a-7e3d2b6a8f10"},
+    }]})
+
+    id: str = Field(description="The sweep's id (a UUID).")
+    name: str | None = Field(default=None, description="The sweep's `name`.")
+    status: SweepState = Field(description="`succeeded` once every run ended, even when "
+                               "some runs failed (see `runs_failed` and runs.csv).")
+    progress: float = Field(ge=0, le=1, description="Fraction of runs ended (completed or "
+                            "failed).")
+    runs_done: int = Field(description="Runs completed, those of an interrupted attempt "
+                           "included (a retry does not redo them).")
+    runs_failed: int = Field(description="Runs that diverged (ended without measures); "
+                             "their rows in runs.csv say so.")
+    runs_total: int = Field(description="Grid points x replicas.")
+    model: str = Field(description="The base scenario's model kind.")
+    created_at: dt.datetime
+    started_at: dt.datetime | None = Field(description="Start of the latest attempt.")
+    finished_at: dt.datetime | None
+    attempts: int = Field(description="Attempts started; a lost worker's sweep is retried "
+                          "once, continuing from its finished runs.")
+    cancel_requested: bool
+    timeout_seconds: float = Field(description="Wall-clock limit of the whole sweep.")
+    error: Problem | None = Field(
+        description="Why the sweep failed or timed out; for a queued one, why its previous "
+        "attempt was interrupted.")
+    results: Literal["pending", "available", "none", "expired"] = Field(
+        description="available: table, runs and series can be fetched (also after a "
+        "cancel: the runs finished before it); none: ended without results; expired: "
+        "deleted after the TTL.")
+    results_expire_at: dt.datetime | None
+    checksums: dict[str, str] | None = Field(description="sha256 (hex) of each result file.")
+    links: dict[str, str]
+
+
+class SweepList(BaseModel):
+    items: list[SweepStatus]
+    next_cursor: str | None = Field(description="Pass as `cursor` for the next page.")

@@ -1,0 +1,268 @@
+"""/v1/sweeps: submit a parameter sweep, follow it, cancel it, fetch its tables.
+
+A sweep is a row of the job store (kind 'sweep') run by the same supervisor and workers
+as a job: stored durably before the 202, queued with the jobs (the same queue limit),
+retried once when its worker is lost, continuing from the runs it had finished.
+"""
+
+from __future__ import annotations
+
+import time
+import uuid
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Header, Query, Request
+from fastapi import Path as PathParam
+from fastapi.responses import FileResponse, JSONResponse, Response, StreamingResponse
+from starlette.concurrency import run_in_threadpool
+
+from schemas.status import SweepList, SweepStatus
+from service.jobs import IdempotencyConflict, Job, JobRuntime, NewJob, QueueFull
+from service.sweeps.tables import read_table
+
+from ..admission import queue_full, queue_gauge
+from ..deps import HubDep, RuntimeDep, SettingsDep, get_job
+from ..events import wait_for_change
+from ..problems import ProblemError
+from ..sweep_submission import parse_sweep_submission
+from ..sweep_wire import EXAMPLE_SWEEP, sweep_view
+from ..wire import Status
+from .jobs import SSE_KEEPALIVE_SECONDS, _decode_cursor, _encode_cursor
+
+router = APIRouter(prefix="/sweeps", tags=["sweeps"])
+
+SweepId = Annotated[uuid.UUID, PathParam(description="The sweep's id (a UUID).",
+                                         examples=["5d0c4a7e-2b1f-4f0e-9c1a-7e3d2b6a8f10"])]
+_ERRORS: dict[int | str, dict] = {401: {}, 404: {}, 409: {}, 410: {}, 422: {}}
+_CSV = "text/csv; charset=utf-8"
+
+
+def _get(runtime: JobRuntime, sweep_id: uuid.UUID) -> Job:
+    return get_job(runtime, sweep_id, kind="sweep")
+
+
+@router.post(
+    "",
+    status_code=202,
+    response_model=SweepStatus,
+    summary="Submit a parameter sweep",
+    description="Validates the sweep and every run it expands to (errors name the run and "
+    "the field), checks this service's limits (runs per sweep, total agent-steps, and each "
+    "run's own limits), stores it durably, then answers 202 with a `Location` header. The "
+    "body is a `Sweep`, or a `SweepRequest` wrapping one with a `timeout_seconds`. With an "
+    "`Idempotency-Key`, repeating the same request returns the same sweep; another body "
+    "with the same key is a 409.",
+    responses={400: {}, 401: {}, 409: {}, 413: {}, 422: {}, 429: {}, 503: {}},
+    openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
+        "schema": {"oneOf": [{"$ref": "#/components/schemas/Sweep"},
+                             {"$ref": "#/components/schemas/SweepRequest"}]},
+        "examples": {
+            "sweep": {"summary": "A sweep", "value": EXAMPLE_SWEEP},
+            "wrapped": {"summary": "A sweep with a time limit",
+                        "value": {"sweep": EXAMPLE_SWEEP, "timeout_seconds": 7200}},
+        }}}}},
+)
+async def submit(
+    request: Request,
+    runtime: RuntimeDep,
+    settings: SettingsDep,
+    idempotency_key: Annotated[str | None, Header(
+        alias="Idempotency-Key", min_length=1, max_length=200, pattern=r"^[\x21-\x7e]+$",
+        description="Any unique string; retries with the same key return the same sweep.",
+    )] = None,
+) -> JSONResponse:
+    if not runtime.supervisor.alive:
+        raise ProblemError(503, "unavailable", "Service unavailable",
+                           "the job supervisor is not running", headers={"Retry-After": "30"})
+    raw = await request.body()
+    sub = await run_in_threadpool(parse_sweep_submission, raw, settings)
+    new = NewJob(scenario=sub.canonical, model_kind=sub.model_kind, n_agents=sub.max_agents,
+                 steps_total=sub.runs_total, timeout_seconds=sub.timeout_seconds,
+                 request_hash=sub.request_hash, idempotency_key=idempotency_key, kind="sweep")
+    try:
+        job, created = await run_in_threadpool(runtime.store.insert, new,
+                                               max_queued=settings.max_queued)
+    except QueueFull as exc:
+        gauge = queue_gauge(request.app)
+        assert gauge is not None  # the runtime exists: the store just answered
+        body, headers = queue_full(exc.queued, settings.max_queued, gauge)
+        raise ProblemError(429, "queue-full", body["title"], body["detail"],
+                           headers=headers, retry_after_seconds=body["retry_after_seconds"]
+                           ) from None
+    except IdempotencyConflict as exc:
+        raise ProblemError(409, "idempotency-conflict", "Idempotency key reused",
+                           f"this Idempotency-Key was used for {exc.job_id} with a "
+                           f"different request", job_id=exc.job_id) from None
+    if created:
+        runtime.supervisor.wake()
+    view = sweep_view(job, settings.result_ttl_seconds)
+    headers = {"Location": view.links["self"]}
+    if not created:
+        headers["Idempotent-Replayed"] = "true"
+    return JSONResponse(view.model_dump(mode="json"), status_code=202, headers=headers)
+
+
+@router.get("", response_model=SweepList, summary="List sweeps, newest first",
+            responses={401: {}, 422: {}})
+def list_sweeps(
+    runtime: RuntimeDep,
+    settings: SettingsDep,
+    status: Annotated[list[Status] | None, Query(description="Only these statuses.")] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    cursor: Annotated[str | None, Query(max_length=64, description="From `next_cursor`.")
+                      ] = None,
+) -> SweepList:
+    rows = runtime.store.list(statuses=status or (), before_seq=_decode_cursor(cursor),
+                              limit=limit, kind="sweep")
+    next_cursor = _encode_cursor(rows[-1].seq) if len(rows) == limit else None
+    return SweepList(items=[sweep_view(j, settings.result_ttl_seconds) for j in rows],
+                     next_cursor=next_cursor)
+
+
+@router.get("/{sweep_id}", response_model=SweepStatus, summary="Get a sweep",
+            responses={401: {}, 404: {}, 422: {}})
+async def get_sweep(
+    sweep_id: SweepId,
+    runtime: RuntimeDep,
+    settings: SettingsDep,
+    hub: HubDep,
+    wait: Annotated[float, Query(ge=0, le=60, description=(
+        "Long-poll: answer as soon as the sweep changes (status or runs done) or is "
+        "finished, or after this many seconds."))] = 0,
+) -> SweepStatus:
+    with hub.subscribe(str(sweep_id)) as changed:
+        job = await run_in_threadpool(_get, runtime, sweep_id)
+        if wait > 0 and not job.terminal and await wait_for_change(changed, wait):
+            job = await run_in_threadpool(_get, runtime, sweep_id)
+    return sweep_view(job, settings.result_ttl_seconds)
+
+
+@router.get("/{sweep_id}/spec", summary="The sweep as stored",
+            description="The canonical sweep (every default filled in) that runs; submitting "
+            "it again describes the same runs.",
+            responses={200: {"content": {"application/json": {"schema": {
+                "$ref": "#/components/schemas/Sweep"}}}}, 401: {}, 404: {}, 422: {}})
+def spec(sweep_id: SweepId, runtime: RuntimeDep) -> Response:
+    return Response(_get(runtime, sweep_id).scenario, media_type="application/json")
+
+
+@router.post("/{sweep_id}/cancel", status_code=202, response_model=SweepStatus,
+             summary="Cancel a sweep",
+             description="A queued sweep is cancelled at once; a running one stops after "
+             "its current runs, keeping the runs it finished (their table can be fetched). "
+             "Cancelling a cancelled sweep is a no-op; any other finished sweep gives 409.",
+             responses={401: {}, 404: {}, 409: {}, 422: {}})
+def cancel(sweep_id: SweepId, runtime: RuntimeDep, settings: SettingsDep) -> SweepStatus:
+    _get(runtime, sweep_id)
+    job = runtime.store.request_cancel(str(sweep_id))
+    assert job is not None
+    if job.terminal and job.status != "cancelled":
+        raise ProblemError(409, "sweep-finished", "Sweep already finished",
+                           f"the sweep is {job.status}; it can no longer be cancelled",
+                           status_now=job.status)
+    if job.status == "running":
+        runtime.supervisor.cancel(job.id)
+    return sweep_view(job, settings.result_ttl_seconds)
+
+
+@router.get("/{sweep_id}/events", summary="Follow a sweep as Server-Sent Events",
+            response_class=StreamingResponse,
+            responses={200: {"content": {"text/event-stream": {"schema": {"type": "string"}},
+                                         "application/json": None},
+                             "description": "`event: sweep` with the sweep as JSON on every "
+                             "change (runs done, status); `event: end` after it finished."},
+                       401: {}, 404: {}, 422: {}})
+async def events(sweep_id: SweepId, runtime: RuntimeDep, settings: SettingsDep, hub: HubDep
+                 ) -> StreamingResponse:
+    await run_in_threadpool(_get, runtime, sweep_id)
+
+    async def stream() -> AsyncIterator[str]:
+        last = None
+        with hub.subscribe(str(sweep_id)) as changed:
+            while True:
+                job = await run_in_threadpool(_get, runtime, sweep_id)
+                view = sweep_view(job, settings.result_ttl_seconds).model_dump_json()
+                if view != last:
+                    last = view
+                    yield f"event: sweep\ndata: {view}\n\n"
+                if job.terminal:
+                    yield "event: end\ndata: {}\n\n"
+                    return
+                if hub.closing:  # the server is shutting down: reconnect later
+                    yield "event: shutdown\ndata: {}\n\n"
+                    return
+                if not await wait_for_change(changed, SSE_KEEPALIVE_SECONDS):
+                    yield f": keep-alive {time.time():.0f}\n\n"
+
+    return StreamingResponse(stream(), media_type="text/event-stream",
+                             headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
+
+
+Format = Annotated[Literal["csv", "json"] | None, Query(
+    description="csv or json; default: json when the Accept header asks for "
+    "application/json, else csv.")]
+
+
+def _table_route(name: str, summary: str, description: str) -> None:
+    """Register GET /{sweep_id}/<name>: one of the sweep's CSV files, as CSV or JSON."""
+    filename = f"{name}.csv"
+
+    async def route(sweep_id: SweepId, runtime: RuntimeDep, request: Request,
+                    format: Format = None) -> Response:
+        job, folder = await run_in_threadpool(_results_dir, runtime, sweep_id)
+        path = folder / filename
+        if not path.is_file():
+            raise ProblemError(404, "no-results", "No results",
+                               f"the sweep ended ({job.status}) without a {filename}")
+        if (format or _negotiate(request)) == "json":
+            body = await run_in_threadpool(read_table, folder, "json", name)
+            assert isinstance(body, dict)
+            return JSONResponse({"sweep_id": job.id, **body})
+        return FileResponse(path, media_type=_CSV, filename=f"{job.id}-{filename}")
+
+    router.add_api_route(
+        f"/{{sweep_id}}/{name}", route, methods=["GET"], summary=summary,
+        description=description + " JSON: `{\"sweep_id\", \"columns\": [...], \"data\": "
+        "[[...], ...]}`, numbers as numbers, axis values as in the sweep, empty cells (a "
+        "missing value) as null.",
+        response_class=Response, response_model=None, tags=["sweeps"],
+        responses={200: {"content": {"text/csv": {"schema": {"type": "string"}},
+                                     "application/json": {"schema": {"type": "object"}}}},
+                   **_ERRORS})
+
+
+def _negotiate(request: Request) -> str:
+    """json when Accept names application/json before (or without) text/csv."""
+    accept = request.headers.get("accept", "").lower()
+    j, c = accept.find("application/json"), accept.find("text/csv")
+    return "json" if j >= 0 and (c < 0 or j < c) else "csv"
+
+
+def _results_dir(runtime: JobRuntime, sweep_id: uuid.UUID) -> tuple[Job, Path]:
+    job = _get(runtime, sweep_id)
+    if job.results_expired:
+        raise ProblemError(410, "results-expired", "Results expired",
+                           "this sweep's results were deleted after the retention period")
+    if not job.has_results:
+        if not job.terminal:
+            raise ProblemError(409, "results-pending", "Results not ready",
+                               f"the sweep is {job.status}", status_now=job.status)
+        raise ProblemError(404, "no-results", "No results",
+                           f"the sweep ended ({job.status}) without results")
+    folder = runtime.results.job_dir(job.id)
+    if not folder.is_dir():  # deleted under us by the expiry sweep
+        raise ProblemError(410, "results-expired", "Results expired",
+                           "this sweep's results were deleted after the retention period")
+    return job, folder
+
+
+_table_route("table", "The sweep's table: one row per grid point",
+             "table.csv: the axes' values, then each measure's mean, sd, sem and count over "
+             "the grid point's replicas.")
+_table_route("runs", "The sweep's runs: one row per run",
+             "runs.csv: run index, each axis path, replica, seed, status and every measure.")
+_table_route("series", "The sweep's time series averaged over replicas",
+             "series.csv: per grid point and observation step, the mean and sd over "
+             "replicas of each observable named in the sweep's `series`.")

@@ -1,0 +1,293 @@
+"""Run a sweep into a folder, resumably: `run_sweep(sweep, out_dir) -> SweepOutcome`.
+
+The folder:
+  sweep.json          the canonical sweep, its resolved base scenario and every run
+                      (index, grid point, replica, seed, axis values)
+  runs.jsonl          the journal: one line per finished run (see journal.py)
+  runs.csv, table.csv, series.csv   the tables (see tables.py), rewritten atomically
+                      every TABLE_INTERVAL s or more and at the end (also on cancel)
+  runs/<index>/summary.json         keep = summaries (the default) or all
+  runs/<index>/{scenario.json, observables.csv, trajectory.h5}   keep = all
+Running the same sweep into the same folder again resumes it: runs found in the journal
+are not redone. A folder holding a different sweep is refused (SweepFolderConflict).
+
+The engine is reached through `kernels.run_batch` (BATCH_RUNS consecutive runs at a time,
+so memory stays bounded however many runs a sweep has), or, for keep = all, through
+`service.execute.execute_to_dir` one run at a time (frames need a sink); both give the
+same bits as `kernels.run` of the run's scenario alone. Importing this module does not
+import the engine.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+from pydantic import ValidationError
+
+from schemas import FieldError, Scenario
+from schemas.sweep import Sweep, SweepError, SweepRun
+
+from ..execute import execute_to_dir, run_summary
+from .journal import Journal, read_journal
+from .measures import reduce_run
+from .tables import SWEEP_FILE, atomic_write, axis_columns, write_tables
+
+if TYPE_CHECKING:
+    from kernels import RunResult
+
+BATCH_RUNS = 64  # runs handed to the engine at once (the batch it may fuse)
+TABLE_INTERVAL = 10.0  # least seconds between table rewrites while a sweep runs
+
+
+@dataclass(frozen=True)
+class SweepProgress:
+    """Runs finished so far: `runs_done` completed, `runs_failed` diverged (a numerical
+    blow-up: a finished run without measures), out of `runs_total`."""
+
+    runs_done: int
+    runs_failed: int
+    runs_total: int
+
+
+@dataclass(frozen=True)
+class SweepOutcome:
+    """How `run_sweep` ended: "completed" (every run finished) or "cancelled" (stopped;
+    the finished runs are kept and a rerun resumes). `runs_resumed`: finished runs found in
+    the folder at the start."""
+
+    status: Literal["completed", "cancelled"]
+    runs_done: int
+    runs_failed: int
+    runs_total: int
+    out_dir: Path
+    runs_resumed: int = 0
+
+
+class SweepFolderConflict(FileExistsError):
+    """The output folder holds something other than this sweep."""
+
+
+def run_sweep(
+    sweep: Sweep,
+    out_dir: Path,
+    *,
+    on_progress: Callable[[SweepProgress], None] | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> SweepOutcome:
+    """Run every run of `sweep` not yet finished in `out_dir`, writing the tables.
+
+    Raises SweepError (before any run) for an invalid sweep or an observable the model
+    does not have, SweepFolderConflict for a folder holding something else; engine errors
+    (e.g. kernels.BackendUnavailable) propagate, with the finished runs kept.
+    """
+    runs = sweep.expand()
+    out_dir = Path(out_dir)
+    resuming = _check_folder(out_dir, sweep)
+    records = {i: r for i, r in read_journal(out_dir).items() if i < len(runs)} \
+        if resuming else {}
+    resumed = len(records)
+    pending = [r for r in runs if r.index not in records]
+    if pending:  # before the folder is made: a fixed sweep file is then no "other sweep"
+        _check_observables(sweep, pending[0])
+    if not resuming:
+        _create_folder(out_dir, sweep, runs)
+    state = _State(sweep, runs, out_dir, records, on_progress)
+    state.progress()
+
+    def stop() -> bool:
+        return should_stop is not None and should_stop()
+
+    journal = Journal(out_dir)
+    try:
+        if sweep.keep == "all":
+            _run_with_artifacts(pending, state, journal, stop, should_stop)
+        else:
+            _run_batched(pending, state, journal, stop, should_stop)
+    finally:
+        journal.close()
+        state.write_tables()
+    done, failed = state.counts()
+    status = "completed" if len(records) == len(runs) else "cancelled"
+    return SweepOutcome(status, done, failed, len(runs), out_dir, resumed)
+
+
+class _State:
+    """What the runner holds while a sweep runs: the records and the progress reporting."""
+
+    def __init__(self, sweep: Sweep, runs: list[SweepRun], out_dir: Path,
+                 records: dict[int, dict[str, Any]],
+                 on_progress: Callable[[SweepProgress], None] | None):
+        self.sweep, self.runs, self.out_dir = sweep, runs, out_dir
+        self.records = records
+        self.on_progress = on_progress
+        self.last_tables = time.monotonic()
+        self.table_interval = TABLE_INTERVAL
+
+    def counts(self) -> tuple[int, int]:
+        failed = sum(1 for r in self.records.values() if r["status"] != "completed")
+        return len(self.records) - failed, failed
+
+    def progress(self) -> None:
+        if self.on_progress is not None:
+            done, failed = self.counts()
+            self.on_progress(SweepProgress(done, failed, len(self.runs)))
+
+    def finish(self, run: SweepRun, result: RunResult, journal: Journal) -> None:
+        """Record one finished run. The journal line goes last: it is the resume state,
+        so a run whose line is missing is redone (and its summary rewritten)."""
+        record = _record(self.sweep, run, result)
+        if self.sweep.keep == "summaries":
+            summary = run_summary(run.scenario, result, frames=0, files=["summary.json"])
+            summary["sweep_run"] = {"run": run.index, "point": run.point,
+                                    "replica": run.replica, "seed": run.seed,
+                                    "values": run.values}
+            folder = self.out_dir / "runs" / str(run.index)
+            folder.mkdir(parents=True, exist_ok=True)
+            atomic_write(folder / "summary.json",
+                         json.dumps(summary, indent=2, allow_nan=False), durable=False)
+        journal.append(record)
+        self.records[run.index] = record
+        self.progress()
+        if time.monotonic() - self.last_tables >= self.table_interval:
+            self.write_tables()
+
+    def write_tables(self) -> None:
+        """Rewrite the tables; the next periodic rewrite waits at least 10 times as long
+        as this one took, so a sweep with long series does not spend its time in CSV."""
+        t0 = time.monotonic()
+        write_tables(self.out_dir, self.sweep, self.runs, self.records)
+        self.last_tables = time.monotonic()
+        self.table_interval = max(TABLE_INTERVAL, 10 * (self.last_tables - t0))
+
+
+def _run_batched(pending: list[SweepRun], state: _State, journal: Journal,
+                 stop: Callable[[], bool], should_stop: Callable[[], bool] | None) -> None:
+    import kernels
+
+    for start in range(0, len(pending), BATCH_RUNS):
+        if stop():
+            return
+        chunk = pending[start:start + BATCH_RUNS]
+
+        def on_result(i: int, result: RunResult, chunk: list[SweepRun] = chunk) -> None:
+            if result.status != "cancelled":  # a cancelled run is redone on resume
+                state.finish(chunk[i], result, journal)
+
+        kernels.run_batch([r.scenario for r in chunk], on_result=on_result,
+                          should_stop=should_stop)
+
+
+def _run_with_artifacts(pending: list[SweepRun], state: _State, journal: Journal,
+                        stop: Callable[[], bool],
+                        should_stop: Callable[[], bool] | None) -> None:
+    for run in pending:
+        if stop():
+            return
+        folder = state.out_dir / "runs" / str(run.index)
+        got: list[RunResult] = []
+        execute_to_dir(run.scenario, folder, should_stop=should_stop, overwrite=True,
+                       on_result=got.append)
+        if got[0].status == "cancelled":
+            shutil.rmtree(folder, ignore_errors=True)
+            return
+        state.finish(run, got[0], journal)
+
+
+def _record(sweep: Sweep, run: SweepRun, result: RunResult) -> dict[str, Any]:
+    """The journal record of a finished run (measures None for a diverged run)."""
+    obs = result.observables
+    completed = result.status == "completed"
+    if completed:
+        _require_observables(sweep, run, obs)
+    tol = run.scenario.convergence.tolerance
+    measures = {name: _finite(reduce_run(m, obs, tol)) if completed else None
+                for name, m in sweep.measure.items()}
+    series: dict[str, list[Any]] = {}
+    if completed and sweep.series:
+        series = {"step": [int(s) for s in obs["step"]], "time": [float(t) for t in obs["time"]]}
+        series.update({o: [_finite(float(v)) for v in obs[o]] for o in sweep.series})
+    return {"run": run.index, "status": result.status, "seed": run.seed,
+            "measures": measures, "series": series,
+            "error": result.error["message"] if result.error else None}
+
+
+def _finite(v: float | None) -> float | None:
+    return v if v is not None and math.isfinite(v) else None
+
+
+def _require_observables(sweep: Sweep, run: SweepRun, obs: dict[str, Any]) -> None:
+    """SweepError naming each measure or series whose observable this run does not have."""
+    have = sorted(k for k in obs if k not in ("step", "time"))
+    errors = [FieldError(loc=loc, type="unknown_observable",
+                         msg=f"{name!r} is not an observable of runs[{run.index}] "
+                         f"({run.scenario.model.kind}); it has: {', '.join(have)}")
+              for loc, name in [*((f"measure.{k}.observable", m.observable)
+                                  for k, m in sweep.measure.items()),
+                                *((f"series.{i}", o) for i, o in enumerate(sweep.series))]
+              if name not in obs or name in ("step", "time")]
+    if errors:
+        raise SweepError(errors)
+
+
+def _check_observables(sweep: Sweep, first: SweepRun) -> None:
+    """Before any run: a one-step run of the first scenario shows which observables the
+    model has, so a misspelt observable fails now, not after the first full run."""
+    if not sweep.measure and not sweep.series:
+        return
+    import kernels
+
+    doc = first.scenario.model_dump(mode="json")
+    doc["time"]["steps"] = 1
+    doc["recording"]["every"] = 0
+    try:
+        probe = Scenario.model_validate(doc)
+    except ValidationError:
+        return  # a model that needs more steps: checked on the first result instead
+    _require_observables(sweep, first, kernels.run(probe).observables)
+
+
+def _check_folder(out_dir: Path, sweep: Sweep) -> bool:
+    """Whether `out_dir` holds this very sweep (to resume); False when it is absent or
+    empty; SweepFolderConflict when it holds anything else."""
+    path = out_dir / SWEEP_FILE
+    if path.exists():
+        try:
+            old = json.loads(path.read_text())["sweep"]
+        except (ValueError, KeyError, TypeError):
+            raise SweepFolderConflict(f"{path} is not a flocklab sweep file") from None
+        if old != sweep.model_dump(mode="json"):
+            raise SweepFolderConflict(
+                f"{out_dir} holds a different sweep ({old.get('name')!r}; its sweep.json "
+                "differs from this one): choose another folder")
+        return True
+    if out_dir.exists() and not out_dir.is_dir():
+        raise SweepFolderConflict(f"{out_dir} exists and is not a folder")
+    if out_dir.exists() and any(out_dir.iterdir()):
+        raise SweepFolderConflict(f"{out_dir} exists, is not empty and holds no sweep")
+    return False
+
+
+def _create_folder(out_dir: Path, sweep: Sweep, runs: list[SweepRun]) -> None:
+    """The folder and its sweep.json: the canonical sweep and every run."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    doc = {
+        "flocklab_version": "0.1.0",
+        "sweep": sweep.model_dump(mode="json"),
+        "base": sweep.base_scenario.model_dump(mode="json"),
+        "n_points": sweep.n_points,
+        "n_runs": len(runs),
+        "total_agent_steps": sweep.total_agent_steps,
+        "axes": axis_columns(sweep),
+        "measures": list(sweep.measure),
+        "series": list(sweep.series),
+        "runs": [{"run": r.index, "point": r.point, "replica": r.replica, "seed": r.seed,
+                  "values": r.values} for r in runs],
+    }
+    atomic_write(out_dir / SWEEP_FILE, json.dumps(doc, indent=2, allow_nan=False))
