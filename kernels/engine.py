@@ -97,7 +97,9 @@ def run(
         if on_progress is not None:
             on_progress(done, steps)
     wall = time.perf_counter() - t0
-    obs = {k: np.asarray(v, dtype=np.float64) for k, v in series.items()}
+    chosen = rec.observables
+    obs = {k: np.asarray(v, dtype=np.float64) for k, v in series.items()
+           if chosen is None or k in ("step", "time") or k in chosen}
     final = {k: float(v[-1]) for k, v in obs.items() if len(v)}
     tol = scenario.convergence.tolerance
     convergence = {k: time_to_converge(obs["time"], obs[k], tol)

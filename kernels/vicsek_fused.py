@@ -41,8 +41,9 @@ TWO_PI = 2 * np.pi
 # Per-replica parameter slots: prm (f64) and iprm (i32).
 R2, V0DT, ETA, G, L, THETA0, RADIUS = range(7)
 N_PRM = 8
-STEPS, EVERY, TRACK, NOBS, BAD, LINKED, LONGEST, OPEN, CAUSE, MOVE_NEW = range(10)
-N_IPRM = 10
+(STEPS, EVERY, TRACK, NOBS, BAD, LINKED, LONGEST, OPEN, CAUSE, MOVE_NEW, WANT_COMPONENTS,
+ WANT_SPREAD) = range(12)
+N_IPRM = 12
 # Why a replica stopped (iprm[CAUSE]), as the per-step path words it.
 CAUSES = (
     ("heading/position",
@@ -85,12 +86,29 @@ def advance_kernel(rule: int, periodic: bool):
     vicsek = rule == RULES["vicsek"]
 
     @ti.func
-    def build_cells(a0, n, c0, cap, Lb, r, pos: ti.template(), cell: ti.template(),
-                    cstart: ti.template(), cidx: ti.template()):
+    def load(k, i, pos: ti.template(), ew: ti.template(), theta: ti.template(),
+             ps: ti.template(), parent: ti.template()):
+        """Agent i's state X(s) into slot k of ps: (x, y, e_x, e_y), or (x, y, theta, 0)
+        for the JLM rules; and i as its own root of the components."""
+        ps[k, 0] = pos[i, 0]
+        ps[k, 1] = pos[i, 1]
+        if ti.static(vicsek):
+            ps[k, 2] = ew[i, 0]
+            ps[k, 3] = ew[i, 1]
+        else:
+            ps[k, 2] = theta[i]
+            ps[k, 3] = 0.0
+        parent[i] = i
+
+    @ti.func
+    def build_cells(a0, n, c0, cap, Lb, r, pos: ti.template(), ew: ti.template(),
+                    theta: ti.template(), ps: ti.template(), cell: ti.template(),
+                    cstart: ti.template(), cidx: ti.template(), parent: ti.template()):
         """Cell list of the replica's agents: cidx[a0 + k] is the agent in slot k, slots in
         cell order and, within a cell, in id order (a stable counting sort), and cell c
-        holds slots cstart[c0 + c] .. cstart[c0 + c + 1]. Returns the cells across
-        (nx, ny); nx = 0: no grid, visit all pairs."""
+        holds slots cstart[c0 + c] .. cstart[c0 + c + 1]; X(s) is copied into ps in slot
+        order on the way (the visit reads only ps). Returns the cells across (nx, ny);
+        nx = 0: no grid, visit all pairs."""
         nx = 0
         ny = 0
         w = r * _WIDEN
@@ -127,9 +145,10 @@ def advance_kernel(rule: int, periodic: bool):
         if nx > 0:
             for c in range(c0, c0 + nx * ny + 1):
                 cstart[c] = 0
+            inv = 1.0 / w
             for i in range(a0, a0 + n):
-                cx = ti.min(ti.cast(ti.floor((pos[i, 0] - ox) / w), ti.i32), nx - 1)
-                cy = ti.min(ti.cast(ti.floor((pos[i, 1] - oy) / w), ti.i32), ny - 1)
+                cx = ti.min(ti.cast(ti.floor((pos[i, 0] - ox) * inv), ti.i32), nx - 1)
+                cy = ti.min(ti.cast(ti.floor((pos[i, 1] - oy) * inv), ti.i32), ny - 1)
                 cc = ti.max(cx, 0) + nx * ti.max(cy, 0)
                 cell[i] = cc
                 cstart[c0 + cc + 1] += 1
@@ -139,14 +158,16 @@ def advance_kernel(rule: int, periodic: bool):
                 slot = c0 + cell[i]
                 k = cstart[slot]
                 cidx[a0 + k] = i
+                load(a0 + k, i, pos, ew, theta, ps, parent)
                 cstart[slot] = k + 1
             for m in range(nx * ny):  # shift back: start[c] = end[c - 1], from the top
                 c = c0 + nx * ny - m
                 cstart[c] = cstart[c - 1]
             cstart[c0] = 0
         elif nx == 0:
-            for k in range(n):
-                cidx[a0 + k] = a0 + k
+            for k in range(a0, a0 + n):
+                cidx[k] = k
+                load(k, k, pos, ew, theta, ps, parent)
         return ti.math.ivec2(nx, ny)
 
     @ti.func
@@ -291,7 +312,9 @@ def advance_kernel(rule: int, periodic: bool):
         obs[row, 0] = s
         obs[row, 1] = ti.sqrt(sx * sx + sy * sy) / n
         spread = 0.0
-        if ti.static(vicsek):
+        if iprm[b, WANT_SPREAD] == 0:
+            spread = ti.math.nan  # not asked for (recording.observables)
+        elif ti.static(vicsek):
             spread = circular_spread(a0, n, ps, arc_lo, arc_hi)
         else:
             lo = ti.math.inf
@@ -408,24 +431,14 @@ def advance_kernel(rule: int, periodic: bool):
                 track = iprm[b, TRACK] != 0
                 s = s0
                 while s < s1 and s <= steps and iprm[b, BAD] < 0:
-                    graph = s % every == 0 or s == steps  # an observation step
-                    nxy = build_cells(a0, n, c0, cap, Lb, prm[b, RADIUS], pos, cell,
-                                      cstart, cidx)
+                    observing = s % every == 0 or s == steps
+                    graph = observing and iprm[b, WANT_COMPONENTS] != 0
+                    nxy = build_cells(a0, n, c0, cap, Lb, prm[b, RADIUS], pos, ew, theta,
+                                      ps, cell, cstart, cidx, parent)
                     if nxy[0] < 0:
                         iprm[b, BAD] = s
                         iprm[b, CAUSE] = 1
                         break
-                    for k in range(a0, a0 + n):  # X(s) in slot order: the visit reads it
-                        i = cidx[k]
-                        ps[k, 0] = pos[i, 0]
-                        ps[k, 1] = pos[i, 1]
-                        if ti.static(vicsek):
-                            ps[k, 2] = ew[i, 0]
-                            ps[k, 3] = ew[i, 1]
-                        else:
-                            ps[k, 2] = theta[i]
-                            ps[k, 3] = 0.0
-                        parent[i] = i
                     nx = nxy[0]
                     ny = nxy[1]
                     tracking = track and s < steps
@@ -445,7 +458,7 @@ def advance_kernel(rule: int, periodic: bool):
                         if s < steps:
                             bad |= update(b, i, k, s, a0, acc, Lb, prm, iprm, kseed, ps, pos,
                                           ew, theta)
-                    if graph:
+                    if observing:
                         row = ooff[b] + iprm[b, NOBS]
                         iprm[b, NOBS] += 1
                         observe(b, a0, n, s, row, ps, parent, deg, arc_lo, arc_hi, prm, iprm,
@@ -497,9 +510,11 @@ class VicsekBatch:
             track = p.track_linked_intervals
             track = sc.n_agents <= 100_000 if track is None else track
             self.track.append(track)
-            iprm[b, [STEPS, EVERY, TRACK, BAD, MOVE_NEW]] = [
+            chosen = set(sc.recording.observables or OBS)
+            iprm[b, [STEPS, EVERY, TRACK, BAD, MOVE_NEW, WANT_COMPONENTS, WANT_SPREAD]] = [
                 sc.time.steps, sc.recording.observables_every, int(track), -1,
-                int(p.position_update == "new_heading")]
+                int(p.position_update == "new_heading"), int("components" in chosen),
+                int("heading_spread" in chosen)]
             kseed[b] = rng.seed_key(sc.seed, 0)
             init = initial_state(sc)
             th = init.headings
@@ -558,6 +573,9 @@ class VicsekBatch:
             keep.remove("leader_error")
         if not self.track[b]:
             keep.remove("linked_intervals")
+        chosen = self.scenarios[b].recording.observables
+        if chosen is not None:
+            keep = [c for c in keep if c in chosen]
         return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
 
     def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
