@@ -206,9 +206,8 @@ def advance_kernel(rule: int, periodic: bool):
              cell: ti.template(), cstart: ti.template(), cidx: ti.template(),
              parent: ti.template(), parent_u: ti.template()):
         """(sum of the terms, 0, count) over slot k's closed neighbourhood: every slot
-        (minimum image) without a grid, else the 3x3 block of cells around it, read as
-        three contiguous rows of slots away from the seams; periodic images are shifted
-        by +-L per cell or row, never tested per pair."""
+        (minimum image) without a grid, else the 3x3 block of cells around it; periodic
+        images are shifted by +-L per run of slots, never tested per pair."""
         a = ti.math.vec3(0.0)
         if nx == 0:
             for m in range(a0, a0 + n):
@@ -220,7 +219,21 @@ def advance_kernel(rule: int, periodic: bool):
             cc = cell[cidx[k]]
             cx = cc % nx
             cy = cc // nx
-            for dy in ti.static(range(-1, 2)):
+            # Each row of the 3x3 block is one contiguous run of slots (cells cx-1 .. cx+1,
+            # clipped to the row) plus, across a periodic seam, the wrapped cell's run,
+            # shifted by -+L. A runtime loop over the rows keeps the inlined code small:
+            # Taichi re-reads a kernel's Python AST at every process start.
+            lo_c = ti.max(cx - 1, 0)
+            hi_c = ti.min(cx + 1, nx - 1)
+            wc = 0
+            sx = 0.0
+            wrapped = 0
+            if ti.static(periodic):
+                if cx == 0:
+                    wc, sx, wrapped = nx - 1, -Lb, 1
+                elif cx == nx - 1:
+                    wc, sx, wrapped = 0, Lb, 1
+            for dy in range(-1, 2):
                 qy = cy + dy
                 sy = 0.0
                 row_ok = 1
@@ -235,28 +248,11 @@ def advance_kernel(rule: int, periodic: bool):
                     row_ok = ti.cast(qy >= 0 and qy < ny, ti.i32)
                 if row_ok:
                     row = c0 + nx * qy
-                    if cx >= 1 and cx + 1 < nx:  # three cells, contiguous slots: one run
-                        a = run(k, a0 + cstart[row + cx - 1], a0 + cstart[row + cx + 2],
-                                0.0, sy, a, r2, links, ps, cidx, parent, parent_u, graph,
-                                track)
-                    else:  # at a seam or an edge: cell by cell
-                        for dx in ti.static(range(-1, 2)):
-                            qx = cx + dx
-                            sx = 0.0
-                            ok = 1
-                            if ti.static(periodic):
-                                if qx < 0:
-                                    qx += nx
-                                    sx = -Lb
-                                elif qx >= nx:
-                                    qx -= nx
-                                    sx = Lb
-                            else:
-                                ok = ti.cast(qx >= 0 and qx < nx, ti.i32)
-                            if ok:
-                                a = run(k, a0 + cstart[row + qx], a0 + cstart[row + qx + 1],
-                                        sx, sy, a, r2, links, ps, cidx, parent, parent_u,
-                                        graph, track)
+                    a = run(k, a0 + cstart[row + lo_c], a0 + cstart[row + hi_c + 1], 0.0, sy,
+                            a, r2, links, ps, cidx, parent, parent_u, graph, track)
+                    if wrapped:
+                        a = run(k, a0 + cstart[row + wc], a0 + cstart[row + wc + 1], sx, sy,
+                                a, r2, links, ps, cidx, parent, parent_u, graph, track)
         return a
 
     @ti.func
