@@ -121,7 +121,7 @@ def run(
 ResultFn = Callable[[int, RunResult], None]
 # The small-N path runs one replica per CPU task, serially inside: it beats the per-step
 # path (parallel over agents, one launch per pass) up to about this N on this CPU.
-FUSED_MAX_N = 20_000
+FUSED_MAX_N = 10_000
 # Replicas per fused launch: enough to fill the cores, few enough to poll for a stop.
 BATCH_AGENTS = 400_000
 
