@@ -121,8 +121,9 @@ class Scene:
         else:
             image, coarse = _field_data(fr, self.mode, self.view)
             a["image"].set_data(image.T)
-            if first:
-                a["image"].autoscale()
+            if first and self.mode == "density" and image.count():
+                lo, hi = float(image.min()), float(image.max())
+                a["image"].set_clim(lo, max(hi, lo * 1.01))
             a["coarse"].set_UVC(*coarse)
             agents = len(fr.position)
         if lead is not None:
@@ -296,7 +297,7 @@ def _field_artists(ax: Any, cax: Any, mode: str, view: tuple[float, float, float
     blank = np.ma.masked_all((FIELD_BINS, FIELD_BINS))
     if mode == "density":
         im = ax.imshow(blank, origin="lower", extent=(x0, x1, y0, y1), cmap="magma",
-                       norm=LogNorm(), interpolation="nearest", aspect="auto")
+                       norm=LogNorm(1.0, 10.0), interpolation="nearest", aspect="auto")
         label = "agents per unit area"
     else:
         im = ax.imshow(blank, origin="lower", extent=(x0, x1, y0, y1), cmap="viridis",
