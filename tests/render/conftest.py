@@ -71,10 +71,11 @@ def read_image(path_or_bytes: Path | bytes) -> np.ndarray:
     return iio.imread(path_or_bytes)
 
 
-def assert_picture(img: np.ndarray, width: int, height: int) -> None:
-    """The requested size, and not blank: enough non-white pixels of varied colour."""
+def assert_picture(img: np.ndarray, width: int, height: int, min_ink: float = 0.03) -> None:
+    """The requested size, and not blank: enough non-white pixels of varied colour
+    (line plots hold less ink than snapshots: they pass a lower `min_ink`)."""
     assert img.shape[:2] == (height, width), img.shape
     rgb = img[..., :3].astype(np.int16)
     ink = np.any(rgb < 235, axis=2).mean()
-    assert ink > 0.03, f"only {ink:.3%} of the picture is drawn on"
+    assert ink > min_ink, f"only {ink:.3%} of the picture is drawn on"
     assert rgb.std() > 10, "the picture is (nearly) one colour"

@@ -129,7 +129,7 @@ def test_observables_plot_marks_convergence(runs, tmp_path):
     assert marks, "no vertical line at the convergence time"
     out = tmp_path / "obs.png"
     save(fig, out)
-    assert_picture(read_image(out), 900, 700)
+    assert_picture(read_image(out), 900, 700, min_ink=0.01)
     with pytest.raises(RenderInputError, match="unknown observable"):
         draw_observables(new_figure(300, 300), run, ["nope"], 300, 300)
 
