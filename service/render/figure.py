@@ -48,11 +48,3 @@ def save(fig: Any, out: Path | None, fmt: str = "png") -> bytes | None:
         return buf.getvalue()
     fig.savefig(out, format=image_format(out), dpi=DPI)
     return None
-
-
-def rgb_array(fig: Any) -> Any:
-    """The drawn figure as an (H, W, 3) uint8 array (for movie frames)."""
-    import numpy as np
-
-    fig.canvas.draw()
-    return np.asarray(fig.canvas.buffer_rgba())[:, :, :3].copy()

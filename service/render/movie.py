@@ -6,8 +6,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from .errors import RenderInputError
-from .figure import new_figure, rgb_array
+from .errors import PlottingUnavailable, RenderInputError
+from .figure import new_figure
 from .run_data import RunData
 from .snapshot import Scene, SnapshotOptions, view_limits
 
@@ -37,7 +37,10 @@ def write_movie(run: RunData, out: Path, opts: SnapshotOptions, *, fps: float = 
     if len(frames) == 0:
         raise RenderInputError("no frames in the requested range", loc="stride")
     view = _movie_view(run, frames)
-    import imageio.v2 as imageio
+    try:
+        import imageio.v2 as imageio
+    except ImportError as exc:
+        raise PlottingUnavailable("movies need imageio: pip install 'flocklab[plot]'") from exc
 
     scene = Scene(new_figure(opts.width, opts.height), run, opts, view)
     if suffix == ".mp4":
@@ -49,7 +52,7 @@ def write_movie(run: RunData, out: Path, opts: SnapshotOptions, *, fps: float = 
     try:
         for i, k in enumerate(frames):
             scene.draw(k)
-            writer.append_data(rgb_array(scene.fig))
+            writer.append_data(scene.rgb())
             if on_progress is not None:
                 on_progress(i + 1, len(frames))
     finally:

@@ -86,7 +86,8 @@ class Scene:
                                    "or field=arrows)", loc="trails")
         self.want_edges = self.mode == "arrows" and (opts.edges if opts.edges is not None else (
             run.n_agents <= EDGES_MAX_AGENTS and run.kind != "formation"))
-        self.artists: dict[str, Any] = {}
+        self.artists: dict[str, Any] = {}  # everything that changes from frame to frame
+        self._background: Any = None
 
     def draw(self, k: int) -> SnapshotInfo:
         run, opts = self.run, self.opts
@@ -137,6 +138,21 @@ class Scene:
         a["title"].set_text(f"{name}: N = {run.n_agents}, t = {fr.time:.4g} "
                             f"(step {fr.step})")
         return SnapshotInfo(k, fr.step, fr.time, self.mode, agents, edges_drawn, trails_drawn)
+
+    def rgb(self) -> np.ndarray:
+        """The drawn frame as (H, W, 3) uint8, by blitting: the axes, labels, colour bar
+        and static overlays are rendered once, then only the moving artists per frame."""
+        canvas = self.fig.canvas
+        moving = sorted(self.artists.values(), key=lambda art: art.get_zorder())
+        if self._background is None:
+            for art in moving:
+                art.set_animated(True)
+            canvas.draw()
+            self._background = canvas.copy_from_bbox(self.fig.bbox)
+        canvas.restore_region(self._background)
+        for art in moving:
+            art.axes.draw_artist(art)
+        return np.asarray(canvas.buffer_rgba())[:, :, :3].copy()
 
     def _build(self, obst: geometry.Obstacles | None) -> None:
         from matplotlib.collections import LineCollection

@@ -189,3 +189,22 @@ def test_trajectory_frames_are_in_agent_order(runs):
     with h5py.File(run.trajectory_path) as f:
         np.testing.assert_array_equal(f["particles/swarm/position/value"][0],
                                       run.frame(0).position)
+
+
+def test_movie_frames_match_full_drawings(runs):
+    """Blitting (axes drawn once, moving artists per frame) gives the full drawing."""
+    from service.render.movie import _movie_view
+    from service.render.snapshot import Scene
+
+    run = RunData(runs["formation_F1"])
+    opts = SnapshotOptions(320, 320, trails=2)
+    view = _movie_view(run, range(run.n_frames))
+    scene = Scene(new_figure(320, 320), run, opts, view)
+    for k in (0, 5, run.n_frames - 1):
+        scene.draw(k)
+        blitted = scene.rgb()
+        fig = new_figure(320, 320)
+        Scene(fig, run, opts, view).draw(k)
+        fig.canvas.draw()
+        full = np.asarray(fig.canvas.buffer_rgba())[:, :, :3]
+        assert np.abs(full.astype(int) - blitted).mean() < 0.5, k

@@ -19,7 +19,7 @@ import uuid
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, FastAPI, Query, Request
 from fastapi.responses import FileResponse
 from starlette.concurrency import run_in_threadpool
 
@@ -34,7 +34,6 @@ router = APIRouter(prefix="/jobs", tags=["results"])
 RENDER_DIR = "render"
 MAX_CONCURRENT_RENDERS = 2  # child processes drawing at once; more requests wait
 RENDER_TIMEOUT_SECONDS = 300.0
-_slots = asyncio.Semaphore(MAX_CONCURRENT_RENDERS)
 _locks: dict[str, asyncio.Lock] = {}  # one draw per cache file at a time
 _ERRORS: dict[int | str, dict[str, Any]] = {401: {}, 404: {}, 409: {}, 410: {}, 422: {},
                                             503: {}}
@@ -59,7 +58,7 @@ Overlays = Annotated[bool, Query(
             "field at large N. Drawn once per option set, then served from the cache.",
             response_class=FileResponse, responses={**_PNG, **_ERRORS})
 async def snapshot(
-    job_id: JobId, runtime: RuntimeDep,
+    request: Request, job_id: JobId, runtime: RuntimeDep,
     frame: Annotated[int | None, Query(ge=-2**31, le=2**31,
                                        description="Frame index (negative: from the end; "
                                        "default the last).")] = None,
@@ -76,14 +75,14 @@ async def snapshot(
                                   type="value_error")])
     options = {"frame": frame, "time": time, "width": width, "height": height,
                "field": field, "edges": edges, "trails": trails, "overlays": overlays}
-    return await _render(runtime, job_id, "snapshot", "png", options)
+    return await _render(request.app, runtime, job_id, "snapshot", "png", options)
 
 
 @router.get("/{job_id}/render/observables.png", summary="Observables against time",
             description="One panel per observable, the convergence time marked.",
             response_class=FileResponse, responses={**_PNG, **_ERRORS})
 async def observables(
-    job_id: JobId, runtime: RuntimeDep,
+    request: Request, job_id: JobId, runtime: RuntimeDep,
     names: Annotated[str | None, Query(max_length=2000, pattern=r"^[A-Za-z0-9_,]*$",
                                        description="Comma-separated observables (default: "
                                        "the model's usual ones).")] = None,
@@ -94,14 +93,14 @@ async def observables(
         raise invalid([FieldError(loc="query.names", msg="at most 12 observables",
                                   type="value_error")])
     options = {"names": chosen, "width": width, "height": height}
-    return await _render(runtime, job_id, "observables", "png", options)
+    return await _render(request.app, runtime, job_id, "observables", "png", options)
 
 
 @router.get("/{job_id}/render/movie.mp4", summary="The recorded frames as an MP4 movie",
             description="H.264, made once and cached with the results.",
             response_class=FileResponse, responses={**_MP4, **_ERRORS})
 async def movie(
-    job_id: JobId, runtime: RuntimeDep,
+    request: Request, job_id: JobId, runtime: RuntimeDep,
     width: Annotated[int, Query(ge=64, le=1920, description="Width in pixels.")] = 640,
     height: Annotated[int, Query(ge=64, le=1920, description="Height in pixels.")] = 640,
     fps: Annotated[float, Query(gt=0, le=120, allow_inf_nan=False)] = 20.0,
@@ -110,10 +109,10 @@ async def movie(
 ) -> FileResponse:
     options = {"width": width, "height": height, "fps": fps, "stride": stride,
                "field": field, "edges": edges, "overlays": overlays}
-    return await _render(runtime, job_id, "movie", "mp4", options)
+    return await _render(request.app, runtime, job_id, "movie", "mp4", options)
 
 
-async def _render(runtime: Any, job_id: uuid.UUID, what: str, ext: str,
+async def _render(app: FastAPI, runtime: Any, job_id: uuid.UUID, what: str, ext: str,
                   options: dict[str, Any]) -> FileResponse:
     job, folder = await run_in_threadpool(_results_dir, runtime, job_id)
     key = hashlib.sha256(json.dumps([what, options], sort_keys=True).encode()).hexdigest()
@@ -124,18 +123,26 @@ async def _render(runtime: Any, job_id: uuid.UUID, what: str, ext: str,
         lock = _locks.setdefault(str(target), asyncio.Lock())
         async with lock:
             if not target.is_file():  # another request may have drawn it meanwhile
-                await _draw(what, folder, target, options)
+                await _draw(_slots(app), what, folder, target, options)
         _locks.pop(str(target), None)
     return FileResponse(target, media_type=media, filename=filename,
                         content_disposition_type="inline")
 
 
-async def _draw(what: str, folder: Path, target: Path, options: dict[str, Any]) -> None:
+def _slots(app: FastAPI) -> asyncio.Semaphore:
+    """The app's render slots (created on its own event loop, on first use)."""
+    if not hasattr(app.state, "render_slots"):
+        app.state.render_slots = asyncio.Semaphore(MAX_CONCURRENT_RENDERS)
+    return app.state.render_slots
+
+
+async def _draw(slots: asyncio.Semaphore, what: str, folder: Path, target: Path,
+                options: dict[str, Any]) -> None:
     target.parent.mkdir(exist_ok=True)
     tmp = target.with_name(f".{target.stem}.{uuid.uuid4().hex[:8]}{target.suffix}")
     request = json.dumps({"what": what, "folder": str(folder), "out": str(tmp),
                           "options": options}).encode()
-    async with _slots:
+    async with slots:
         proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "service.render.worker", stdin=asyncio.subprocess.PIPE,
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
