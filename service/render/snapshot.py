@@ -159,8 +159,8 @@ class Scene:
 
         fig, run, a = self.fig, self.run, self.artists
         fig.clear()
-        ax = fig.add_axes((0.09, 0.08, 0.74, 0.84))
-        cax = fig.add_axes((0.86, 0.08, 0.03, 0.84))
+        ax = fig.add_axes((0.08, 0.08, 0.72, 0.84))
+        cax = fig.add_axes((0.82, 0.08, 0.025, 0.84))
         x0, x1, y0, y1 = self.view
         n = run.n_agents
         if self.mode == "arrows":

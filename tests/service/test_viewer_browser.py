@@ -95,6 +95,7 @@ def test_submit_follow_play_and_validation(browser, server, tmp_path):
     assert page.locator("#downloads button").count() == 5
     assert canvas_ink(page, "#plot") > 0.002  # the observables plot
     if DOCS_IMG:
+        page.evaluate("window.scrollTo(0, 0)")
         page.screenshot(path=str(Path(DOCS_IMG) / "viewer.png"))
 
     assert not w.errors, w.errors

@@ -76,11 +76,10 @@ function setPath(obj, path, value) {
   o[parts[parts.length - 1]] = value;
 }
 
-function describe(schema, path) {
+function modelProperty(schema, path) {
   // The model's JSON Schema describes model.*; the scenario's other blocks are plain.
-  if (!schema || !path.startsWith("model.")) return "";
-  const prop = (schema.properties || {})[path.split(".")[1]];
-  return (prop && prop.description) || "";
+  if (!schema || !path.startsWith("model.") || path.split(".").length !== 2) return null;
+  return (schema.properties || {})[path.split(".")[1]] || null;
 }
 
 async function showPreset(name) {
@@ -99,14 +98,27 @@ async function showPreset(name) {
     const label = document.createElement("label");
     label.htmlFor = id;
     label.textContent = path;
-    const input = document.createElement("input");
+    const prop = modelProperty(schema, path);
+    let input;
+    if (prop && Array.isArray(prop.enum)) {  // a choice: the schema's values
+      input = document.createElement("select");
+      for (const choice of prop.enum) {
+        const o = document.createElement("option");
+        o.value = o.textContent = String(choice);
+        input.append(o);
+      }
+      input.dataset.kind = "string";
+    } else {
+      input = document.createElement("input");
+      input.dataset.kind = typeof value === "number" ? "number"
+        : typeof value === "boolean" ? "boolean" : typeof value === "string" ? "string" : "json";
+      input.readOnly = Boolean(prop && "const" in prop);
+    }
     input.id = id;
     input.name = path;
-    input.dataset.kind = typeof value === "number" ? "number"
-      : typeof value === "boolean" ? "boolean" : typeof value === "string" ? "string" : "json";
     input.value = input.dataset.kind === "json" || input.dataset.kind === "boolean"
       ? JSON.stringify(value) : String(value);
-    input.title = describe(schema, path);
+    input.title = (prop && prop.description) || "";
     const msg = document.createElement("div");
     msg.className = "field-error";
     row.append(label, input, msg);
@@ -118,7 +130,7 @@ function readForm() {
   const scenario = {};
   let ok = true;
   for (const row of $("fields").querySelectorAll(".field")) {
-    const input = row.querySelector("input");
+    const input = row.querySelector("input, select");
     const text = input.value.trim();
     let value = text;
     if (input.dataset.kind === "number") {
