@@ -85,25 +85,36 @@ def draw_sweep(fig: Any, sweep: SweepData, names: list[str] | None, width: int,
                                f"the sweep has: {', '.join(sweep.measures)}", loc="names")
     x_axis = sweep.axes[0]
     group = sweep.axes[1] if len(sweep.axes) > 1 else None
-    x = sweep.columns[x_axis]
-    groups = np.unique(sweep.columns[group]) if group else np.array([np.nan])
+    x, ticks = _axis_positions(sweep, x_axis)
+    keys = sweep.text[group] if group else [""] * len(x)
+    groups = list(dict.fromkeys(keys))  # in table order
     axes = fig.subplots(len(measures), 1, sharex=True, squeeze=False)[:, 0]
     for ax, m in zip(axes, measures, strict=True):
         mean = sweep.columns[f"{m}_mean"]
         err = sweep.columns.get(f"{m}_sem", sweep.columns.get(f"{m}_sd"))
         for g in groups:
-            rows = np.ones(len(x), bool) if group is None else sweep.columns[group] == g
-            order = np.argsort(x[rows])
+            rows = np.array([k == g for k in keys])
+            order = np.argsort(x[rows], kind="stable")
             yerr = None if err is None else np.nan_to_num(err[rows][order])
             ax.errorbar(x[rows][order], mean[rows][order], yerr=yerr, marker="o", ms=4,
-                        capsize=3, lw=1.2, label=None if group is None else f"{group} = {g:g}")
+                        capsize=3, lw=1.2, label=f"{group} = {g}" if group else None)
         ax.set_ylabel(m, fontsize=8)
         ax.grid(alpha=0.3)
         if group is not None:
             ax.legend(fontsize=7)
+    if ticks is not None:
+        axes[-1].set_xticks(range(len(ticks)), ticks)
     axes[-1].set_xlabel(x_axis)
     bars = "sem" if any(f"{m}_sem" in sweep.columns for m in measures) else "sd"
-    title = sweep.spec.get("name") if isinstance(sweep.spec.get("name"), str) else None
-    fig.suptitle(f"{title or sweep.folder.name}: mean ± {bars} over replicas", fontsize=10)
+    fig.suptitle(f"{sweep.name}: mean ± {bars} over replicas", fontsize=10)
     fig.tight_layout()
     return measures
+
+
+def _axis_positions(sweep: SweepData, axis: str) -> tuple[np.ndarray, list[str] | None]:
+    """Numbers as they are; other values (a rule's name, say) as categories 0, 1, ..."""
+    x = sweep.columns[axis]
+    if np.all(np.isfinite(x)):
+        return x, None
+    labels = list(dict.fromkeys(sweep.text[axis]))
+    return np.array([labels.index(v) for v in sweep.text[axis]], dtype=float), labels

@@ -169,7 +169,15 @@ class SweepData:
     folder: Path
     spec: dict[str, Any]
     axes: list[str]
-    columns: dict[str, np.ndarray] = field(repr=False)
+    columns: dict[str, np.ndarray] = field(repr=False)  # numbers (NaN where not one)
+    text: dict[str, list[str]] = field(repr=False)  # the cells as written
+
+    @property
+    def name(self) -> str:
+        for doc in (self.spec, self.spec.get("sweep")):
+            if isinstance(doc, dict) and isinstance(doc.get("name"), str):
+                return doc["name"]
+        return self.folder.name
 
     @property
     def measures(self) -> list[str]:
@@ -195,8 +203,9 @@ def load_sweep(folder: Path) -> SweepData:
     missing = [a for a in axes if a not in names]
     if missing:
         raise RenderInputError(f"{folder}/table.csv has no column for the axes {missing}")
-    columns = {n: np.array([_number(r[i]) for r in rows[1:]]) for i, n in enumerate(names)}
-    return SweepData(folder, spec, axes, columns)
+    text = {n: [r[i] if i < len(r) else "" for r in rows[1:]] for i, n in enumerate(names)}
+    columns = {n: np.array([_number(v) for v in vals]) for n, vals in text.items()}
+    return SweepData(folder, spec, axes, columns, text)
 
 
 def _axis_name(axis: Any) -> str:

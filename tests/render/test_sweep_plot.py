@@ -39,16 +39,18 @@ def test_sweep_plot_from_real_runs(tmp_path, taichi_cpu):
             pol = [execute_to_dir(_scenario(eta, n, seed), tmp_path / f"r-{n}-{eta}-{seed}")
                    ["final"]["polarization"] for seed in range(REPLICAS)]
             sd = float(np.std(pol, ddof=1))
-            rows.append([eta, n, np.mean(pol), sd, sd / np.sqrt(REPLICAS), REPLICAS])
+            rows.append([len(rows), eta, n, np.mean(pol), sd, sd / np.sqrt(REPLICAS),
+                         REPLICAS])
     with (folder / "table.csv").open("w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["model.eta", "initial.N", "polarization_mean", "polarization_sd",
+        w.writerow(["point", "model.eta", "initial.N", "polarization_mean", "polarization_sd",
                     "polarization_sem", "polarization_count"])
         w.writerows(rows)
+    # as the sweep runner writes it: the spec under "sweep", the axis paths under "axes"
     (folder / "sweep.json").write_text(json.dumps({
-        "name": "vicsek-eta", "axes": [{"path": "model.eta", "values": list(ETAS)},
-                                       {"path": "initial.N", "values": list(SIZES)}],
-        "replicas": REPLICAS}))
+        "sweep": {"name": "vicsek-eta", "axes": [{"path": "model.eta", "values": list(ETAS)},
+                                                 {"path": "initial.N", "values": list(SIZES)}]},
+        "axes": ["model.eta", "initial.N"], "measures": ["polarization"]}))
     assert is_sweep_dir(folder)
     sweep = load_sweep(folder)
     assert sweep.axes == ["model.eta", "initial.N"] and sweep.measures == ["polarization"]
@@ -62,6 +64,7 @@ def test_sweep_plot_from_real_runs(tmp_path, taichi_cpu):
         assert list(ln.get_xdata()) == list(ETAS)
     assert {t.get_text() for t in ax.get_legend().get_texts()} == {
         f"initial.N = {n}" for n in SIZES}
+    assert fig.get_suptitle() == "vicsek-eta: mean ± sem over replicas"
 
     out = tmp_path / "sweep.png"
     r = subprocess.run([sys.executable, "-m", "service.cli", "render", str(folder), "--out",
