@@ -159,7 +159,7 @@ class Scene:
 
         fig, run, a = self.fig, self.run, self.artists
         fig.clear()
-        ax = fig.add_axes((0.08, 0.08, 0.72, 0.84))
+        ax = fig.add_axes((0.1, 0.08, 0.7, 0.84))
         cax = fig.add_axes((0.82, 0.08, 0.025, 0.84))
         x0, x1, y0, y1 = self.view
         n = run.n_agents
@@ -320,12 +320,17 @@ def _field_artists(ax: Any, cax: Any, mode: str, view: tuple[float, float, float
                        vmin=0, vmax=1, interpolation="nearest", aspect="auto")
         label = "local polarization"
     cax.figure.colorbar(im, cax=cax).set_label(label)
+    # empty cells show the background: black (no density) under white arrows, or grey
+    # (no polarization defined) under black arrows
+    ax.set_facecolor("black" if mode == "density" else "0.82")
     m = COARSE_ARROWS
     xe, ye = np.linspace(x0, x1, m + 1), np.linspace(y0, y1, m + 1)
     xc, yc = np.meshgrid((xe[:-1] + xe[1:]) / 2, (ye[:-1] + ye[1:]) / 2, indexing="ij")
     zeros = np.zeros(m * m)
-    coarse = ax.quiver(xc.ravel(), yc.ravel(), zeros, zeros, color="white", angles="xy",
-                       scale_units="xy", scale=1.0, width=0.003, alpha=0.9, zorder=4)
+    coarse = ax.quiver(xc.ravel(), yc.ravel(), zeros, zeros,
+                       color="white" if mode == "density" else "black", angles="xy",
+                       scale_units="xy", scale=1.0, width=0.003, alpha=0.9, zorder=4,
+                       minlength=0)  # an empty cell draws nothing, not a dot
     return im, coarse
 
 
