@@ -135,7 +135,7 @@ def test_playback_rate_at_ten_thousand_agents(browser, make_server, capsys):
                      "FLOCKLAB_MAX_TRAJECTORY_BYTES": str(256 * 2**20),
                      "FLOCKLAB_MAX_BODY_BYTES": str(2**20)})
     with httpx.Client(base_url=s.url, timeout=60) as http:
-        sc = scenario(n=10_000, steps=100, every=2)
+        sc = scenario(n=10_000, steps=60, every=2)
         sc["space"]["L"] = 50.0
         job = submit(http, sc)
         assert wait_for(http, job["id"], timeout=240)["status"] == "succeeded"
@@ -145,7 +145,7 @@ def test_playback_rate_at_ten_thousand_agents(browser, make_server, capsys):
     fps = w.page.evaluate("() => window.flocklabViewer.measurePlayback(100)")
     w.page.select_option("#speed", "4")  # 80 recorded frames a second asked for
     w.page.click("#play")
-    time.sleep(3)
+    time.sleep(2)
     live = w.page.text_content("#fps")
     w.page.click("#play")
     with capsys.disabled():
