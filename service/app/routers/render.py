@@ -16,6 +16,7 @@ import json
 import os
 import sys
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -24,6 +25,7 @@ from fastapi.responses import FileResponse
 from starlette.concurrency import run_in_threadpool
 
 from schemas import FieldError
+from service.jobs import Job
 
 from ..deps import JobId, RuntimeDep
 from ..problems import ProblemError, invalid
@@ -75,7 +77,8 @@ async def snapshot(
                                   type="value_error")])
     options = {"frame": frame, "time": time, "width": width, "height": height,
                "field": field, "edges": edges, "trails": trails, "overlays": overlays}
-    return await _render(request.app, runtime, job_id, "snapshot", "png", options)
+    return await _render(request.app, lambda: _results_dir(runtime, job_id), "snapshot", "png",
+                         options)
 
 
 @router.get("/{job_id}/render/observables.png", summary="Observables against time",
@@ -93,7 +96,8 @@ async def observables(
         raise invalid([FieldError(loc="query.names", msg="at most 12 observables",
                                   type="value_error")])
     options = {"names": chosen, "width": width, "height": height}
-    return await _render(request.app, runtime, job_id, "observables", "png", options)
+    return await _render(request.app, lambda: _results_dir(runtime, job_id), "observables", "png",
+                         options)
 
 
 @router.get("/{job_id}/render/movie.mp4", summary="The recorded frames as an MP4 movie",
@@ -109,12 +113,16 @@ async def movie(
 ) -> FileResponse:
     options = {"width": width, "height": height, "fps": fps, "stride": stride,
                "field": field, "edges": edges, "overlays": overlays}
-    return await _render(request.app, runtime, job_id, "movie", "mp4", options)
+    return await _render(request.app, lambda: _results_dir(runtime, job_id), "movie", "mp4",
+                         options)
 
 
-async def _render(app: FastAPI, runtime: Any, job_id: uuid.UUID, what: str, ext: str,
+async def _render(app: FastAPI, locate: Callable[[], tuple[Job, Path]], what: str, ext: str,
                   options: dict[str, Any]) -> FileResponse:
-    job, folder = await run_in_threadpool(_results_dir, runtime, job_id)
+    """Serve the cached picture of `what` for these options, drawing it first if need be.
+    `locate` finds the results folder or raises the result routes' problems (a sweep's
+    route passes its own, with what="sweep": the worker draws sweep folders too)."""
+    job, folder = await run_in_threadpool(locate)
     key = hashlib.sha256(json.dumps([what, options], sort_keys=True).encode()).hexdigest()
     target = folder / RENDER_DIR / f"{what}-{key[:24]}.{ext}"
     media = "image/png" if ext == "png" else "video/mp4"
