@@ -23,9 +23,10 @@ from .auth import require_api_key
 from .body_limit import BodyLimitMiddleware
 from .events import ChangeHub
 from .problems import PROBLEM_MEDIA_TYPE, install_problem_handlers
-from .routers import catalog, health, jobs, results, sweeps
+from .routers import catalog, health, jobs, render, results, sweeps
 from .settings import Settings, load_settings
 from .sweep_wire import SweepRequest
+from .viewer import install as install_viewer
 from .wire import JobRequest
 
 VERSION = "0.1.0"
@@ -79,8 +80,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                            expose_headers=["Location", "Retry-After", "Idempotent-Replayed"])
     app.include_router(health.router)
     auth = [Depends(require_api_key)]
-    for module in (jobs, results, sweeps, catalog):
+    for module in (jobs, results, render, sweeps, catalog):
         app.include_router(module.router, prefix="/v1", dependencies=auth)
+    install_viewer(app)  # the browser viewer at / and offline Swagger UI assets
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     if not public_docs:
         @app.get("/openapi.json", include_in_schema=False, dependencies=auth)
