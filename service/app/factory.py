@@ -82,6 +82,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     auth = [Depends(require_api_key)]
     for module in (jobs, results, render, sweeps, catalog):
         app.include_router(module.router, prefix="/v1", dependencies=auth)
+    app.include_router(render.sweep_router, prefix="/v1", dependencies=auth)
     install_viewer(app)  # the browser viewer at / and offline Swagger UI assets
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     if not public_docs:

@@ -32,6 +32,7 @@ from ..problems import ProblemError, invalid
 from .results import _results_dir
 
 router = APIRouter(prefix="/jobs", tags=["results"])
+sweep_router = APIRouter(prefix="/sweeps", tags=["sweeps"])
 
 RENDER_DIR = "render"
 MAX_CONCURRENT_RENDERS = 2  # child processes drawing at once; more requests wait
@@ -115,6 +116,26 @@ async def movie(
                "field": field, "edges": edges, "overlays": overlays}
     return await _render(request.app, lambda: _results_dir(runtime, job_id), "movie", "mp4",
                          options)
+
+
+@sweep_router.get("/{sweep_id}/render/plot.png", summary="Each measure against the axes",
+                  description="One panel per measure: the measure's mean against the first "
+                  "axis, one curve per value of the second, error bars from the replicas "
+                  "(sem, else sd): Vicsek 1995 Fig. 2a from `vicsek-1995-fig2a`.",
+                  response_class=FileResponse, responses={**_PNG, **_ERRORS})
+async def sweep_plot(
+    request: Request, sweep_id: uuid.UUID, runtime: RuntimeDep,
+    names: Annotated[str | None, Query(max_length=2000, pattern=r"^[A-Za-z0-9_,]*$",
+                                       description="Comma-separated measures (default: "
+                                       "all).")] = None,
+    width: Width = 900, height: Height = 600,
+) -> FileResponse:
+    from .sweeps import _results_dir as sweep_results_dir
+
+    chosen = [n for n in (names or "").split(",") if n] or None
+    options = {"names": chosen, "width": width, "height": height}
+    return await _render(request.app, lambda: sweep_results_dir(runtime, sweep_id), "sweep",
+                         "png", options)
 
 
 async def _render(app: FastAPI, locate: Callable[[], tuple[Job, Path]], what: str, ext: str,
