@@ -84,3 +84,28 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     assert engine.fused_batch(small, "cuda") is None  # a GPU wants parallel agents
     groups = engine._batches([small, large, small])
     assert sorted(map(sorted, groups)) == [[0, 2], [1]]
+
+
+@pytest.mark.parametrize("per_step", [False, True], ids=["fused", "per_step"])
+def test_chosen_observables_are_the_same_numbers(taichi_cpu, monkeypatch, per_step):
+    if per_step:
+        monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+    full = kernels.run(scenario(N=150, L=7.0, eta=1.0, steps=30, every=0))
+    sc = scenario(N=150, L=7.0, eta=1.0, steps=30, every=0)
+    sc = sc.model_copy(update={"recording": sc.recording.model_copy(
+        update={"observables": ["polarization", "degree_mean"]})})
+    part = kernels.run(sc)
+    assert list(part.observables) == ["step", "time", "polarization", "degree_mean"]
+    for k in part.observables:
+        assert np.array_equal(part.observables[k], full.observables[k]), k
+
+
+def test_unknown_or_undeclared_observables_are_refused():
+    from pydantic import ValidationError
+
+    from schemas import Scenario
+
+    doc = scenario(N=20, L=5.0).model_dump(mode="json")
+    doc["recording"]["observables"] = ["polarization", "energy"]
+    with pytest.raises(ValidationError, match="energy not reported by model vicsek"):
+        Scenario.model_validate(doc)

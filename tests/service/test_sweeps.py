@@ -108,6 +108,15 @@ def test_sweep_table_equals_the_local_runners(http: httpx.Client, tmp_path: Path
     assert as_json["sweep_id"] == created["id"]
     assert {k: as_json[k] for k in ("columns", "data")} == read_table(local, "json")
     assert [row[1] for row in as_json["data"]] == [0.5, 2.0]  # one row per grid point
+    pytest.importorskip("matplotlib")
+    plot = http.get(f"{base}/render/plot.png", params={"width": 400, "height": 300},
+                    timeout=120)
+    assert plot.status_code == 200, plot.text
+    assert plot.headers["content-type"] == "image/png"
+    import imageio.v3 as iio
+
+    img = iio.imread(plot.content)
+    assert img.shape[:2] == (300, 400) and img.std() > 5  # a drawn plot, not blank
     assert http.get(f"{base}/table").headers["content-type"].startswith("text/csv")
 
     # Sweeps are listed apart from jobs, and a sweep is not a job.
