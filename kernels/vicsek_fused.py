@@ -114,34 +114,34 @@ def advance_kernel(rule: int, periodic: bool):
         w = r * _WIDEN
         ox = 0.0
         oy = 0.0
-        if n > ALL_PAIRS_N:
-            if ti.static(periodic):
+        if ti.static(periodic):
+            if n > ALL_PAIRS_N:
                 nc = ti.min(ti.cast(ti.floor(Lb / w), ti.i32), ti.cast(ti.sqrt(cap), ti.i32))
                 if nc >= 3:  # fewer: the 3x3 block would meet a cell twice
                     nx = nc
                     ny = nc
                     w = Lb / nc
-            else:
-                lo = ti.math.vec2(ti.math.inf)
-                hi = ti.math.vec2(-ti.math.inf)
-                for i in range(a0, a0 + n):
-                    p = ti.math.vec2(pos[i, 0], pos[i, 1])
-                    lo = ti.min(lo, p)
-                    hi = ti.max(hi, p)
-                ext = hi - lo
-                if not (ti.max(ext[0], ext[1]) < MAX_CELLS_ACROSS * w):  # NaN included
-                    nx = -1  # runaway: the caller stops the replica
+        else:
+            lo = ti.math.vec2(ti.math.inf)
+            hi = ti.math.vec2(-ti.math.inf)
+            for i in range(a0, a0 + n):
+                p = ti.math.vec2(pos[i, 0], pos[i, 1])
+                lo = ti.min(lo, p)
+                hi = ti.max(hi, p)
+            ext = hi - lo
+            if not (ti.max(ext[0], ext[1]) < MAX_CELLS_ACROSS * w):  # NaN included
+                nx = -1  # runaway (checked at every N): the caller stops the replica
+            elif n > ALL_PAIRS_N:
                 # Widen the cells until the grid fits the replica's cell budget (a swarm
                 # spread over 10^6 radii then shares a few large cells: slower, never wrong).
-                if nx == 0:
-                    while (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
-                        w *= 2.0
-                    nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
-                    ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
-                    ox = lo[0]
-                    oy = lo[1]
-                    if nx < 3 and ny < 3:
-                        nx = 0
+                while (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
+                    w *= 2.0
+                nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
+                ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
+                ox = lo[0]
+                oy = lo[1]
+                if nx < 3 and ny < 3:
+                    nx = 0
         if nx > 0:
             for c in range(c0, c0 + nx * ny + 1):
                 cstart[c] = 0

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import time
 from collections.abc import Callable
@@ -42,7 +43,9 @@ from .tables import SWEEP_FILE, atomic_write, axis_columns, write_tables
 if TYPE_CHECKING:
     from kernels import RunResult
 
-BATCH_RUNS = 64  # runs handed to the engine at once (the batch it may fuse)
+# Runs handed to the engine at once (the batch it may fuse into one launch); smaller
+# batches report and resume at a finer grain. FLOCKLAB_SWEEP_BATCH_RUNS sets it.
+BATCH_RUNS = max(1, int(os.environ.get("FLOCKLAB_SWEEP_BATCH_RUNS", "64")))
 TABLE_INTERVAL = 10.0  # least seconds between table rewrites while a sweep runs
 
 

@@ -21,8 +21,10 @@ from .conftest import TEST_ENV, _cleanup
 from .svc_helpers import assert_problem
 
 # Small sweep limits to test against: 12 runs, 10^6 agent-steps.
+# One run per engine call, so cancels and kills land between runs (the engine would fuse
+# a whole batch of these small runs into one launch that ends all of them together).
 SWEEP_ENV = {**TEST_ENV, "FLOCKLAB_MAX_SWEEP_RUNS": "12",
-             "FLOCKLAB_MAX_SWEEP_AGENT_STEPS": "1000000"}
+             "FLOCKLAB_MAX_SWEEP_AGENT_STEPS": "1000000", "FLOCKLAB_SWEEP_BATCH_RUNS": "1"}
 
 
 def sweep_spec(etas: tuple[float, ...] = (0.5, 2.0), replicas: int = 2, n: int = 40,
