@@ -1,0 +1,122 @@
+"""M4 on the fused small-N path: a replica gives the same bits alone, in a batch, cut into
+any windows, and the same prefix when cancelled; the engine picks the path from the
+scenario alone. (The plane is M4's only space.)"""
+
+import numpy as np
+import pytest
+
+import kernels
+from kernels import batch, engine
+from kernels.formation_fused import MAX_N, FormationBatch
+from tests.test_formation import STRAIGHT, explicit, scenario
+
+SPLINE = {"kind": "spline", "waypoints": [[0.0, 60.0], [-50.0, 50.0]], "arrival_time": 2.0}
+# A mix a sweep would batch together: designs, gains, paths, schedules, N, steps, seeds.
+MIX = [
+    (dict(attraction={"kind": "linear", "k": 1.5}, path=STRAIGHT,
+          formation=explicit("wedge", 10),
+          schedule=[{"start": 0.1, "end": 0.3, "rotate": 2.0}]), dict(N=10, steps=40)),
+    (dict(attraction={"kind": "quadratic", "c": 0.05},
+          repulsion={"kind": "inverse_square", "k_g": 400.0}, path=SPLINE,
+          formation={"kind": "named", "shape": "circle"},
+          schedule=[{"start": 0.0, "end": 0.2, "formation": explicit("hex", 12, 0.4),
+                     "relaxation": "linear"}]), dict(N=12, steps=33, seed=2)),
+    (dict(design="F2", attraction={"kind": "saturating", "k": 2.0, "v_max": 9.0},
+          path={"kind": "straight", "target": [10.0, 12.0], "arrival_time": 4.0}),
+     dict(N=30, steps=25, seed=3, obs_every=4, inclusive=True)),
+    (dict(design="F2", path=SPLINE), dict(N=7, steps=40, seed=4, obs_every=3)),
+]
+
+
+def same_result(a, b):
+    assert a.status == b.status and a.steps == b.steps
+    assert a.observables.keys() == b.observables.keys()
+    for k in a.observables:
+        assert np.array_equal(a.observables[k], b.observables[k]), k
+    assert a.extra["dense_regime"] == b.extra["dense_regime"]
+
+
+class Frames:
+    def __init__(self):
+        self.steps, self.frames = [], []
+
+    def frame(self, step, time, arrays):
+        self.steps.append(step)
+        self.frames.append(arrays)
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk4"])
+def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, integrator):
+    scenarios = [scenario(dict(m, integrator=integrator), every=0, **kw) for m, kw in MIX]
+    together = kernels.run_batch(scenarios)
+    assert len(engine._batches(scenarios)) == 1  # one launch for all four
+    for sc, res in zip(scenarios, together, strict=True):
+        assert res.extra["engine_path"] == "fused"
+        assert res.status == "completed", res.error
+        same_result(res, kernels.run(sc))
+
+
+def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, monkeypatch):
+    m, kw = MIX[1]
+    arrays = ("position", "velocity")
+    whole = kernels.run(scenario(m, every=0, **kw))
+    sink = Frames()
+    framed = kernels.run(scenario(m, every=7, arrays=arrays, **kw), sink=sink)
+    assert sink.steps == [*range(0, 33, 7), 33]
+    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", 12 * 3)  # windows of 3 steps
+    cut = kernels.run(scenario(m, every=0, **kw))
+    cut_sink = Frames()
+    kernels.run(scenario(m, every=7, arrays=arrays, **kw), sink=cut_sink)
+    same_result(whole, framed)
+    same_result(whole, cut)
+    assert cut_sink.steps == sink.steps
+    for a, b in zip(sink.frames, cut_sink.frames, strict=True):
+        for k in arrays:
+            assert np.array_equal(a[k], b[k]), k
+    # The last frame's velocity is the rate of the last state (the observation's speeds).
+    v = sink.frames[-1]["velocity"]
+    assert np.hypot(*v.T).max() == pytest.approx(whole.final["speed_max"], rel=1e-12)
+
+
+def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, monkeypatch):
+    m, kw = MIX[0]
+    sc = scenario(m, every=0, **kw)
+    whole = kernels.run(sc)
+    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", 10 * 10)  # windows of 10 steps
+    polls = iter([False, True])
+    part = kernels.run(sc, should_stop=lambda: next(polls))
+    assert part.status == "cancelled" and part.steps == 20
+    assert np.array_equal(part.observables["step"], np.arange(21))
+    for k in whole.observables:
+        assert np.array_equal(part.observables[k], whole.observables[k][:21]), k
+
+
+def test_divergence_stops_only_its_replica(taichi_cpu):
+    good = scenario(*MIX[0][:1], every=0, **MIX[0][1])
+    same = scenario({"design": "F2", "path": STRAIGHT}, every=0,
+                    positions=[[0.0, 0.0], [0.0, 0.0], [5.0, 1.0]])
+    huge = scenario({"design": "F2", "path": STRAIGHT, "attraction": {"kind": "quadratic"}},
+                    N=30, dt=1e6, steps=50, every=0)
+    res = kernels.run_batch([good, same, huge])
+    assert [r.extra["engine_path"] for r in res] == ["fused"] * 3
+    assert res[0].status == "completed" and res[0].steps == 40
+    same_result(res[0], kernels.run(good))
+    assert res[1].status == "diverged" and res[1].error["step"] == 0 == res[1].steps
+    assert "same position" in res[1].error["cause"]
+    assert res[2].status == "diverged" and 0 < res[2].steps < 50
+    assert res[2].error["step"] == res[2].steps and "non-finite" in res[2].error["cause"]
+    assert len(res[2].observables["step"]) == res[2].steps + 1  # observed up to the stop
+
+
+def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
+    m = {"design": "F2", "path": STRAIGHT}
+    assert FormationBatch.batch_key(scenario(m, N=113)) is not None  # 9 N <= 1024: exact
+    assert FormationBatch.batch_key(scenario(m, N=114)) is None  # the dense regime may act
+    exact = dict(m, max_exact_candidates=None)
+    assert FormationBatch.batch_key(scenario(exact, N=MAX_N)) is not None
+    assert FormationBatch.batch_key(scenario(exact, N=MAX_N + 1)) is None
+    assert FormationBatch.batch_key(scenario(m, N=1)) is None
+    small = scenario(m, N=20, steps=2)
+    assert engine.fused_batch(small, "cpu") is FormationBatch
+    assert engine.fused_batch(small, "cuda") is None
+    assert kernels.run(scenario(m, N=114, steps=2)).extra["engine_path"] == "per_step"
