@@ -13,8 +13,9 @@ the same numbers alone, in a batch, or cut into any windows.
 The leader is evaluated inside the kernel at every step (and RK4 half step): a straight
 path as p0 + q t until the arrival time, F1's schedule (rotations, morphs, smoothstep or
 linear) from the stored formations and their 2x2 weights. A spline path's arc-length
-timing is the host's (`formation_path.ArcLengthSpline`): p(t), and q(t) at observation
-steps, are tabulated on the host for each window.
+timing is the host's (`formation_path.SplineTable`, the per-step path's arc-length
+inversion vectorised over t): p(t), and q(t) at observation steps, are tabulated for each
+window (about 0.1 ms per step on the host, the fused path's largest cost for a spline).
 
 Not on this path (`FormationBatch.batch_key` returns None, the per-step path runs them):
 a run whose Euler step could enter the dense regime (9 N > `max_exact_candidates`: the
@@ -32,12 +33,13 @@ from schemas import Scenario
 from schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
 
 from .formation_forces import F_KINDS, G_KINDS
-from .formation_path import make_path
+from .formation_path import SplineTable, make_path
 from .formation_schedule import OffsetSchedule
 from .initial import initial_state
 
 nd = ti.types.ndarray()
-MAX_N = 1024  # all pairs up to here; beyond, the per-step path's grid is cheaper
+MAX_N = 512  # all pairs up to here: at N = 1000 a fused F2 step cost as much CPU as a
+# per-step one (4.3 vs 4.2 ms, the per-step path on 2 threads), at N = 500 1.3 vs 2.2 ms
 SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
 TWO_PI = 2 * np.pi
 _NO_PAIR = 1e300
@@ -595,6 +597,7 @@ class FormationBatch:
         )
         self.splines = [b for b, sc in enumerate(scenarios)
                         if isinstance(sc.model.path, SplinePath)]
+        self.tables = {b: SplineTable(self.paths[b]) for b in self.splines}
         self.now = np.zeros(B, dtype=np.int64)  # each replica's current step
 
     def _lead_table(self, s0: int, s1: int) -> ti.Ndarray:
@@ -608,12 +611,12 @@ class FormationBatch:
         for b in self.splines:
             sc = self.scenarios[b]
             steps, every = int(self.steps[b]), sc.recording.observables_every
-            tstep = sc.time.dt / self.per
-            for h in range(h0, min(s1, steps) * self.per + 1):
-                table[b, h - h0, :2] = self.paths[b].position(h * tstep)
-                s, rem = divmod(h, self.per)
-                if rem == 0 and (s % every == 0 or s == steps):
-                    table[b, h - h0, 2:] = self.paths[b].velocity(h * tstep)
+            h = np.arange(h0, min(s1, steps) * self.per + 1)
+            t = h * (sc.time.dt / self.per)
+            table[b, : len(h), :2] = self.tables[b].positions(t)
+            s, rem = np.divmod(h, self.per)
+            seen = (rem == 0) & ((s % every == 0) | (s == steps))  # observation steps
+            table[b, np.flatnonzero(seen), 2:] = self.tables[b].velocities(t[seen])
         lead = ti.ndarray(ti.f64, shape=table.shape)
         lead.from_numpy(table)
         return lead
@@ -654,8 +657,8 @@ class FormationBatch:
             h = int(self.now[b]) * self.per
             lead = np.zeros((len(self.scenarios), 1, 4))
             if b in self.splines:
-                lead[b, 0, :2] = self.paths[b].position(h * self.scenarios[b].time.dt
-                                                        / self.per)
+                t = np.array([h * (self.scenarios[b].time.dt / self.per)])
+                lead[b, 0, :2] = self.tables[b].positions(t)[0]
             table = ti.ndarray(ti.f64, shape=lead.shape)
             table.from_numpy(lead)
             vel = ti.ndarray(ti.f64, shape=(int(self.aoff[-1]), 2))

@@ -120,3 +120,18 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     assert engine.fused_batch(small, "cpu") is FormationBatch
     assert engine.fused_batch(small, "cuda") is None
     assert kernels.run(scenario(m, N=114, steps=2)).extra["engine_path"] == "per_step"
+
+
+def test_the_spline_table_is_the_scalar_path():
+    """The vectorised arc-length inversion the fused path tabulates p(t) and q(t) with
+    gives the scalar solver's values (to its tolerance), before and after the arrival."""
+    from kernels.formation_path import SplineTable, make_path
+    from schemas.formation import SplinePath
+
+    spline = make_path(SplinePath.model_validate(SPLINE), np.array([25.0, 25.0]))
+    t = np.linspace(0.0, 2.5, 601)  # arrival at 2.0
+    table = SplineTable(spline)
+    p, q = table.positions(t), table.velocities(t)
+    np.testing.assert_allclose(p, [spline.position(x) for x in t], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(q, [spline.velocity(x) for x in t], rtol=0, atol=1e-11)
+    assert np.all(q[t >= 2.0] == 0.0) and np.hypot(*q[t < 2.0].T).min() > 1.0
