@@ -571,7 +571,6 @@ class FormationBatch:
                                 float(c.relaxation == "linear")])
                 inforce.extend([k, *m.ravel()] for k, m in sched.in_force)
                 forms.extend(row for k in sched.stored for row in k)
-        self.iprm_np = iprm
         self.steps = iprm[:, STEPS].copy()
 
         def arr(a, shape, dtype=ti.f64) -> ti.Ndarray:
