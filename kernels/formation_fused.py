@@ -585,7 +585,7 @@ class FormationBatch:
             aoff=arr(self.aoff, None, i32), ooff=arr(self.ooff, None, i32),
             prm=arr(prm, None), iprm=arr(iprm, None, i32), chg=arr(chg, (1, 4)),
             inforce=arr(inforce, (1, 5)), forms=arr(forms, (1, 2)),
-            lead=ti.ndarray(ti.f64, shape=(B, 1, 4)), pos=arr(pos, None),
+            lead0=ti.ndarray(ti.f64, shape=(B, 1, 4)), pos=arr(pos, None),
             ps=ti.ndarray(ti.f64, shape=(total, 2)),
             kk=ti.ndarray(ti.f64, shape=(total, 8) if self.per == 2 else (1, 8)),
             y=ti.ndarray(ti.f64, shape=(total, 2) if self.per == 2 else (1, 2)),
@@ -593,17 +593,19 @@ class FormationBatch:
             ang=ti.ndarray(ti.f64, shape=total), gmax=ti.ndarray(ti.f64, shape=total),
             gcnt=ti.ndarray(i32, shape=total),
             obs=arr(np.zeros((int(self.ooff[-1]), N_OBS)), None),
+            vel=ti.ndarray(ti.f64, shape=(total, 2)),
         )
         self.splines = [b for b, sc in enumerate(scenarios)
                         if isinstance(sc.model.path, SplinePath)]
         self.tables = {b: SplineTable(self.paths[b]) for b in self.splines}
+        self.last_p: dict[int, tuple[int, np.ndarray]] = {}  # b: (h, p) of the last row
         self.now = np.zeros(B, dtype=np.int64)  # each replica's current step
 
     def _lead_table(self, s0: int, s1: int) -> ti.Ndarray:
         """The spline leaders' p(t) for the window's time indices (and q(t) at the
         observation steps), from half-step index s0 * per on."""
         if not self.splines:
-            return self.args["lead"]
+            return self.args["lead0"]  # read by spline replicas only
         h0 = s0 * self.per
         rows = (s1 - s0) * self.per + 1
         table = np.zeros((len(self.scenarios), rows, 4))
@@ -611,14 +613,20 @@ class FormationBatch:
             sc = self.scenarios[b]
             steps, every = int(self.steps[b]), sc.recording.observables_every
             h = np.arange(h0, min(s1, steps) * self.per + 1)
-            t = h * (sc.time.dt / self.per)
-            table[b, : len(h), :2] = self.tables[b].positions(t)
             s, rem = np.divmod(h, self.per)
             seen = (rem == 0) & ((s % every == 0) | (s == steps))  # observation steps
-            table[b, np.flatnonzero(seen), 2:] = self.tables[b].velocities(t[seen])
-        lead = ti.ndarray(ti.f64, shape=table.shape)
-        lead.from_numpy(table)
-        return lead
+            table[b, : len(h)] = self.tables[b].at(h * (sc.time.dt / self.per), seen)
+            self.last_p[b] = (int(h[-1]), table[b, len(h) - 1, :2].copy())
+        return self._device("lead", table)
+
+    def _device(self, name: str, a: np.ndarray) -> ti.Ndarray:
+        """`a` in a reused device array (windows mostly share one shape; allocating a
+        Taichi ndarray costs more than the copy)."""
+        held = self.args.get(name)
+        if held is None or held.shape != a.shape:
+            held = self.args[name] = ti.ndarray(ti.f64, shape=a.shape)
+        held.from_numpy(a)
+        return held
 
     def advance(self, s0: int, s1: int) -> None:
         """Advance every replica from step s0 towards s1 (each stops at its own end)."""
@@ -654,16 +662,18 @@ class FormationBatch:
             out["position"] = a["pos"].to_numpy()[a0:a1]
         if "velocity" in arrays:
             h = int(self.now[b]) * self.per
-            lead = np.zeros((len(self.scenarios), 1, 4))
-            if b in self.splines:
-                t = np.array([h * (self.scenarios[b].time.dt / self.per)])
-                lead[b, 0, :2] = self.tables[b].positions(t)[0]
-            table = ti.ndarray(ti.f64, shape=lead.shape)
-            table.from_numpy(lead)
-            vel = ti.ndarray(ti.f64, shape=(int(self.aoff[-1]), 2))
+            table = a["lead0"]
+            if b in self.splines:  # p(t) of the state: the last window's last row
+                at, p = self.last_p.get(b, (-1, None))
+                if at != h:
+                    t = np.array([h * (self.scenarios[b].time.dt / self.per)])
+                    p = self.tables[b].at(t, np.zeros(1, dtype=bool))[0, :2]
+                lead = np.zeros((len(self.scenarios), 1, 4))
+                lead[b, 0, :2] = p
+                table = self._device("frame_lead", lead)
             self.velocity_k(b, h, a["aoff"], a["prm"], a["iprm"], a["chg"], a["inforce"],
-                            a["forms"], table, a["pos"], vel)
-            out["velocity"] = vel.to_numpy()[a0:a1]
+                            a["forms"], table, a["pos"], a["vel"])
+            out["velocity"] = a["vel"].to_numpy()[a0:a1]
         return out
 
     def convergence_keys(self) -> list[str]:

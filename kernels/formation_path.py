@@ -181,37 +181,21 @@ class SplineTable:
             u[k] = np.where(inside, u_new, 0.5 * (lo[k] + hi[k]))
         return j, u
 
-    def _chunks(self, t: np.ndarray, fn) -> np.ndarray:
-        """fn over t in blocks (arrays of 8 x 16 quadrature nodes per t stay in cache)."""
-        out = np.zeros((len(t), 2))
-        for k in range(0, len(t), _CHUNK):
-            out[k:k + _CHUNK] = fn(t[k:k + _CHUNK])
+    def at(self, t: np.ndarray, want_q: np.ndarray) -> np.ndarray:
+        """(len(t), 4): p(t) for every t, and q(t) where `want_q` (zero elsewhere): one
+        arc-length inversion serves both."""
+        out = np.zeros((len(t), 4))
+        out[:, :2] = self.s.end
+        moving = np.flatnonzero(t < self.s.arrival_time)
+        for k in range(0, len(moving), _CHUNK):
+            rows = moving[k:k + _CHUNK]
+            j, u = self._locate(t[rows])
+            uu = u[:, None]
+            out[rows, :2] = self.p0[j] + uu * (self.b[j] + uu * (self.c[j] + uu * self.e[j]))
+            der = self._der(j, u)
+            q = self.s.speed * der / np.hypot(der[:, 0], der[:, 1])[:, None]
+            out[rows, 2:] = np.where(want_q[rows, None], q, 0.0)
         return out
-
-    def positions(self, t: np.ndarray) -> np.ndarray:
-        """p(t) for every t, (len(t), 2)."""
-        def block(tb: np.ndarray) -> np.ndarray:
-            out = np.tile(self.s.end, (len(tb), 1))
-            moving = tb < self.s.arrival_time
-            if moving.any():
-                j, u = self._locate(tb[moving])
-                uu = u[:, None]
-                out[moving] = self.p0[j] + uu * (self.b[j] + uu * (self.c[j]
-                                                                   + uu * self.e[j]))
-            return out
-        return self._chunks(t, block)
-
-    def velocities(self, t: np.ndarray) -> np.ndarray:
-        """q(t) for every t, (len(t), 2)."""
-        def block(tb: np.ndarray) -> np.ndarray:
-            out = np.zeros((len(tb), 2))
-            moving = tb < self.s.arrival_time
-            if moving.any():
-                j, u = self._locate(tb[moving])
-                der = self._der(j, u)
-                out[moving] = self.s.speed * der / np.hypot(der[:, 0], der[:, 1])[:, None]
-            return out
-        return self._chunks(t, block)
 
 
 def _natural_second_derivatives(knots: np.ndarray, pts: np.ndarray) -> np.ndarray:

@@ -131,7 +131,15 @@ def test_the_spline_table_is_the_scalar_path():
     spline = make_path(SplinePath.model_validate(SPLINE), np.array([25.0, 25.0]))
     t = np.linspace(0.0, 2.5, 601)  # arrival at 2.0
     table = SplineTable(spline)
-    p, q = table.positions(t), table.velocities(t)
+    want_q = np.arange(len(t)) % 3 == 0
+    pq = table.at(t, want_q)
+    p, q = pq[:, :2], pq[want_q, 2:]
     np.testing.assert_allclose(p, [spline.position(x) for x in t], rtol=0, atol=1e-11)
-    np.testing.assert_allclose(q, [spline.velocity(x) for x in t], rtol=0, atol=1e-11)
-    assert np.all(q[t >= 2.0] == 0.0) and np.hypot(*q[t < 2.0].T).min() > 1.0
+    np.testing.assert_allclose(q, [spline.velocity(x) for x in t[want_q]], rtol=0,
+                               atol=1e-11)
+    assert np.all(pq[~want_q, 2:] == 0.0)
+    assert np.all(q[t[want_q] >= 2.0] == 0.0) and np.hypot(*q[t[want_q] < 2.0].T).min() > 1
+    # Row by row the same bits however the times are cut (the windows of a run).
+    cut = np.concatenate([table.at(t[:7], want_q[:7]), table.at(t[7:300], want_q[7:300]),
+                          table.at(t[300:], want_q[300:])])
+    assert np.array_equal(cut, pq)
