@@ -143,3 +143,42 @@ def test_the_spline_table_is_the_scalar_path():
     cut = np.concatenate([table.at(t[:7], want_q[:7]), table.at(t[7:300], want_q[7:300]),
                           table.at(t[300:], want_q[300:])])
     assert np.array_equal(cut, pq)
+
+
+SCHEDULE = [  # rotate, morph, an abrupt rotation, morph (linear), rotate (linear)
+    {"start": 0.05, "end": 0.1, "rotate": 1.0},
+    {"start": 0.12, "end": 0.2, "formation": {"kind": "named", "shape": "hex",
+                                              "orientation": 0.3}},
+    {"start": 0.2, "end": 0.2, "rotate": -0.5},
+    {"start": 0.25, "end": 0.3, "formation": explicit("line", 9), "relaxation": "linear"},
+    {"start": 0.31, "end": 0.35, "rotate": 2.0, "relaxation": "linear"},
+]
+
+
+@pytest.mark.parametrize("integrator, path", [("euler", STRAIGHT), ("rk4", SPLINE)],
+                         ids=["euler-straight", "rk4-spline"])
+def test_both_paths_agree_through_a_chain_of_formation_changes(taichi_cpu, monkeypatch,
+                                                              integrator, path):
+    """The in-kernel schedule (which stored formation, which weights, at every stage time)
+    against the per-step path's host schedule, frames and every observable."""
+    m = dict(path=path, formation={"kind": "named", "shape": "wedge"}, schedule=SCHEDULE,
+             integrator=integrator)
+    sc = scenario(m, N=9, steps=40, every=8, arrays=("position", "velocity"), obs_every=3)
+    runs = {}
+    for name in ("fused", "per_step"):
+        if name == "per_step":
+            monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+        sink = Frames()
+        res = kernels.run(sc, sink=sink)
+        assert res.extra["engine_path"] == name and res.status == "completed"
+        runs[name] = res, sink
+    (a, fa), (b, fb) = runs["fused"], runs["per_step"]
+    assert a.observables.keys() == b.observables.keys()
+    for k in a.observables:
+        np.testing.assert_allclose(a.observables[k], b.observables[k], rtol=1e-12,
+                                   atol=1e-12, err_msg=k)
+    assert fa.steps == fb.steps == [*range(0, 40, 8), 40]
+    for x, y in zip(fa.frames, fb.frames, strict=True):
+        for k in x:
+            np.testing.assert_allclose(x[k], y[k], rtol=1e-12, atol=1e-11, err_msg=k)
+    assert a.observables["formation_error_max"].max() > 1.0  # the changes do show
