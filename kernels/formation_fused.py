@@ -613,6 +613,8 @@ class FormationBatch:
             sc = self.scenarios[b]
             steps, every = int(self.steps[b]), sc.recording.observables_every
             h = np.arange(h0, min(s1, steps) * self.per + 1)
+            if not len(h):  # this replica has ended
+                continue
             s, rem = np.divmod(h, self.per)
             seen = (rem == 0) & ((s % every == 0) | (s == steps))  # observation steps
             table[b, : len(h)] = self.tables[b].at(h * (sc.time.dt / self.per), seen)
