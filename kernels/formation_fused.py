@@ -35,6 +35,7 @@ from schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePa
 from .formation_forces import F_KINDS, G_KINDS
 from .formation_path import SplineTable, make_path
 from .formation_schedule import OffsetSchedule
+from .grid import _WIDEN as GRID_WIDEN
 from .initial import initial_state
 
 nd = ti.types.ndarray()
@@ -46,17 +47,22 @@ _NO_PAIR = 1e300
 
 # Per-replica parameter slots: prm (f64) and iprm (i32).
 (R2, D, D2, KG, FA, FB, DT, TSTEP, SX, SY, QX, QY, T_ARR, EX, EY, COLLIDE, TOL,
- LAG_SIGN) = range(18)
-N_PRM = 18
+ LAG_SIGN, CELL, EXTENT) = range(20)
+N_PRM = 20
 (STEPS, EVERY, BAD, CAUSE, NOBS, FKIND, GKIND, F1, SPLINE, C0, NC, I0, F0) = range(13)
 N_IPRM = 13
-# Why a replica stopped (iprm[CAUSE]), as the per-step path words it.
+# Why a replica stopped (iprm[CAUSE]), as the per-step path words it: its step check
+# (0, 1), or its grid's check of the positions it buckets (2, 3; kernels/grid.py), which
+# runs first at every step and RK4 stage. Cause 3 is formatted with prm[EXTENT].
 CAUSES = (
-    ("position", "two agents at the same position, where g is singular "
-                 "(dt too large lets agents jump onto each other)"),
-    ("position", "non-finite position (dt too large for the repulsion's stiffness at "
-                 "close range)"),
+    "two agents at the same position, where g is singular (dt too large lets agents jump "
+    "onto each other)",
+    "non-finite position (dt too large for the repulsion's stiffness at close range)",
+    "a position became non-finite",
+    "the swarm spans {:.3g} length units, over 2^30 neighbour radii (agents escaping: dt "
+    "too large or forces unbounded)",
 )
+MAX_CELLS_ACROSS = 2.0**30  # as kernels/grid.py
 # Observable columns of the buffer (the step first); F1 and F2 fill their own.
 OBS = ("step", "leader_x", "leader_y", "leader_speed", "centroid_x", "centroid_y",
        "centroid_distance", "speed_min", "speed_mean", "speed_max", "speed_error_max",
@@ -250,6 +256,31 @@ def _nonfinite(x, y):
 
 
 @ti.func
+def _runaway(b, a0, n, src: ti.template(), prm: ti.template(), iprm: ti.template()):
+    """The per-step grid's check of the positions it is about to bucket: 1 (and the
+    replica stopped with cause 2 or 3) if one is non-finite or the swarm spans over 2^30
+    cells of side d."""
+    lo = ti.math.vec2(ti.math.inf)
+    hi = ti.math.vec2(-ti.math.inf)
+    bad = 0
+    for i in range(a0, a0 + n):
+        x = ti.math.vec2(src[i, 0], src[i, 1])
+        bad |= ti.cast(_nonfinite(x[0], x[1]), ti.i32)
+        lo = ti.min(lo, x)
+        hi = ti.max(hi, x)
+    extent = ti.max(hi[0] - lo[0], hi[1] - lo[1])
+    cause = -1
+    if bad != 0:
+        cause = 2
+    elif extent / prm[b, CELL] > MAX_CELLS_ACROSS:
+        cause = 3
+        prm[b, EXTENT] = extent
+    if cause >= 0:
+        iprm[b, CAUSE] = cause
+    return ti.cast(cause >= 0, ti.i32)
+
+
+@ti.func
 def _observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
              chg: ti.template(), inforce: ti.template(), lead: ti.template(),
              forms: ti.template(), pos: ti.template(), deg: ti.template(),
@@ -433,6 +464,9 @@ def advance_kernel(rk4: bool):
                 s = s0
                 while s < s1 and s <= steps and iprm[b, BAD] < 0:
                     h = s * per
+                    if _runaway(b, a0, n, pos, prm, iprm) != 0:
+                        iprm[b, BAD] = s
+                        break
                     if s % every == 0 or s == steps:
                         row = ooff[b] + iprm[b, NOBS]
                         iprm[b, NOBS] += 1
@@ -466,25 +500,32 @@ def advance_kernel(rk4: bool):
                                 kk[i, 1] = r[1]
                                 coincident |= ti.cast(r[2] > 0.0, ti.i32)
                                 nonfinite |= ti.cast(_nonfinite(r[0], r[1]), ti.i32)
+                            stop = 0  # the stage grid's check stops the step at once
                             for stage in ti.static(range(1, 4)):
                                 a = 0.5 * dt
                                 if ti.static(stage == 3):
                                     a = dt
-                                for i in range(a0, a0 + n):
-                                    for c in ti.static(range(2)):
-                                        y[i, c] = pos[i, c] + a * kk[i, 2 * stage - 2 + c]
-                                hp = h + 1
-                                if ti.static(stage == 3):
-                                    hp = h + 2
-                                lq, _q2, mq, mr, kq, kr = _leader_state(
-                                    b, hp, h0, prm, iprm, chg, inforce, lead)
-                                for i in range(a0, a0 + n):
-                                    r = _rate(b, i, a0, n, y, lq, mq, mr, kq, kr, prm, iprm,
-                                              forms)
-                                    kk[i, 2 * stage] = r[0]
-                                    kk[i, 2 * stage + 1] = r[1]
-                                    coincident |= ti.cast(r[2] > 0.0, ti.i32)
-                                    nonfinite |= ti.cast(_nonfinite(r[0], r[1]), ti.i32)
+                                if stop == 0:
+                                    for i in range(a0, a0 + n):
+                                        for c in ti.static(range(2)):
+                                            y[i, c] = pos[i, c] + a * kk[i, 2 * stage - 2 + c]
+                                    stop = _runaway(b, a0, n, y, prm, iprm)
+                                if stop == 0:
+                                    hp = h + 1
+                                    if ti.static(stage == 3):
+                                        hp = h + 2
+                                    lq, _q2, mq, mr, kq, kr = _leader_state(
+                                        b, hp, h0, prm, iprm, chg, inforce, lead)
+                                    for i in range(a0, a0 + n):
+                                        r = _rate(b, i, a0, n, y, lq, mq, mr, kq, kr, prm,
+                                                  iprm, forms)
+                                        kk[i, 2 * stage] = r[0]
+                                        kk[i, 2 * stage + 1] = r[1]
+                                        coincident |= ti.cast(r[2] > 0.0, ti.i32)
+                                        nonfinite |= ti.cast(_nonfinite(r[0], r[1]), ti.i32)
+                            if stop != 0:
+                                iprm[b, BAD] = s
+                                break
                             for i in range(a0, a0 + n):
                                 for c in ti.static(range(2)):
                                     pos[i, c] = pos[i, c] + dt / 6.0 * (
@@ -560,7 +601,7 @@ class FormationBatch:
                 f.v_max if isinstance(f, SaturatingF) else 0.0, dt, dt / self.per,
                 *straight[0], *straight[1], straight[2], *straight[3],
                 p.collision_distance or d / 100.0, p.leader_tolerance or d / 100.0,
-                -1.0 if p.lag_sign == "eq8" else 1.0]
+                -1.0 if p.lag_sign == "eq8" else 1.0, d * GRID_WIDEN, 0.0]
             iprm[b, :] = [sc.time.steps, sc.recording.observables_every, -1, 0, 0,
                           F_KINDS[f.kind], G_KINDS[p.repulsion.kind], int(f1), int(spline),
                           len(chg), len(p.schedule), len(inforce), len(forms)]
@@ -689,7 +730,10 @@ class FormationBatch:
         step = int(iprm[b, BAD])
         if step < 0:
             return None
-        return (step, *CAUSES[iprm[b, CAUSE]])
+        cause = CAUSES[iprm[b, CAUSE]]
+        if iprm[b, CAUSE] == 3:
+            cause = cause.format(float(self.args["prm"].to_numpy()[b, EXTENT]))
+        return step, "position", cause
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:

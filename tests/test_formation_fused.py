@@ -109,8 +109,31 @@ def test_divergence_stops_only_its_replica(taichi_cpu):
     assert res[1].status == "diverged" and res[1].error["step"] == 0 == res[1].steps
     assert "same position" in res[1].error["cause"]
     assert res[2].status == "diverged" and 0 < res[2].steps < 50
-    assert res[2].error["step"] == res[2].steps and "non-finite" in res[2].error["cause"]
-    assert len(res[2].observables["step"]) == res[2].steps + 1  # observed up to the stop
+    assert res[2].error["step"] == res[2].steps and "spans" in res[2].error["cause"]
+    # The stopping state is not observed: the runaway check comes first, as on the
+    # per-step path (its grid refuses to bucket the swarm).
+    assert len(res[2].observables["step"]) == res[2].steps
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk4"])
+@pytest.mark.parametrize("case", ["runaway", "coincident"])
+def test_divergence_has_the_per_step_step_and_cause(taichi_cpu, monkeypatch, integrator,
+                                                    case):
+    if case == "runaway":
+        m, kw = {"design": "F2", "path": STRAIGHT}, dict(N=30, dt=1e3, steps=20)
+    else:
+        m, kw = {"design": "F2", "path": STRAIGHT}, dict(
+            positions=[[0.0, 0.0], [3.0, 0.0], [3.0, 0.0]], steps=20)
+    sc = scenario(dict(m, integrator=integrator), every=0, **kw)
+    fused = kernels.run(sc)
+    monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+    per_step = kernels.run(sc)
+    assert (fused.extra["engine_path"], per_step.extra["engine_path"]) == ("fused",
+                                                                         "per_step")
+    assert fused.status == per_step.status == "diverged"
+    assert fused.error == per_step.error
+    assert fused.steps == per_step.steps
+    assert np.array_equal(fused.observables["step"], per_step.observables["step"])
 
 
 def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
