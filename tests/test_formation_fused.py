@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import kernels
-from kernels import batch, engine
+from kernels import engine
 from kernels.formation_fused import MAX_N, FormationBatch
 from tests.test_formation import STRAIGHT, explicit, scenario
 
@@ -46,13 +46,13 @@ class Frames:
 
 
 @pytest.mark.parametrize("integrator", ["euler", "rk4"])
-def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, monkeypatch, integrator):
+def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, fixed_windows, integrator):
     scenarios = [scenario(dict(m, integrator=integrator), every=0, **kw) for m, kw in MIX]
     together = kernels.run_batch(scenarios)
     assert len(engine._batches(scenarios)) == 1  # one launch for all four
     alone = [kernels.run(sc) for sc in scenarios]
     # And in windows of 7 steps, some replicas ending before the others.
-    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", 59 * 7)
+    fixed_windows(59 * 7)
     cut = kernels.run_batch(scenarios)
     for res, res_cut, ref in zip(together, cut, alone, strict=True):
         assert res.extra["engine_path"] == "fused"
@@ -61,14 +61,14 @@ def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, monkeypatch, inte
         same_result(res_cut, ref)
 
 
-def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, monkeypatch):
+def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, fixed_windows):
     m, kw = MIX[1]
     arrays = ("position", "velocity")
     whole = kernels.run(scenario(m, every=0, **kw))
     sink = Frames()
     framed = kernels.run(scenario(m, every=7, arrays=arrays, **kw), sink=sink)
     assert sink.steps == [*range(0, 33, 7), 33]
-    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", 12 * 3)  # windows of 3 steps
+    fixed_windows(12 * 3)  # windows of 3 steps
     cut = kernels.run(scenario(m, every=0, **kw))
     cut_sink = Frames()
     kernels.run(scenario(m, every=7, arrays=arrays, **kw), sink=cut_sink)
@@ -83,11 +83,11 @@ def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, monkeypatch):
     assert np.hypot(*v.T).max() == pytest.approx(whole.final["speed_max"], rel=1e-12)
 
 
-def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, monkeypatch):
+def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, fixed_windows):
     m, kw = MIX[0]
     sc = scenario(m, every=0, **kw)
     whole = kernels.run(sc)
-    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", 10 * 10)  # windows of 10 steps
+    fixed_windows(10 * 10)  # windows of 10 steps
     polls = iter([False, True])
     part = kernels.run(sc, should_stop=lambda: next(polls))
     assert part.status == "cancelled" and part.steps == 20

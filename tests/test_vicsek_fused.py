@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import kernels
-from kernels import batch, engine
+from kernels import engine
 from tests.test_vicsek import Frames, scenario
 
 # A mix a sweep would batch together: different N, L, noise, steps and seeds.
@@ -42,24 +42,22 @@ def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, rule, L):
         same_result(res, kernels.run(sc))
 
 
-def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, monkeypatch):
+def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, fixed_windows):
     sc = scenario(N=200, L=8.0, eta=1.5, steps=60, every=0)
     whole = kernels.run(sc)
     sink = Frames()
     framed = kernels.run(scenario(N=200, L=8.0, eta=1.5, steps=60, every=7), sink=sink)
     assert sink.steps == [*range(0, 60, 7), 60]
-    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", 200 * 3)  # windows of 3 steps
-    monkeypatch.setattr(batch, "WINDOW_SECONDS", None)
+    fixed_windows(200 * 3)  # windows of 3 steps
     cut = kernels.run(sc)
     same_result(whole, framed)
     same_result(whole, cut)
 
 
-def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, monkeypatch):
+def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, fixed_windows):
     sc = scenario(N=100, L=6.0, eta=1.0, steps=50, every=0)
     whole = kernels.run(sc)
-    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", 100 * 10)  # windows of 10 steps
-    monkeypatch.setattr(batch, "WINDOW_SECONDS", None)
+    fixed_windows(100 * 10)  # windows of 10 steps
     polls = iter([False, True])
     part = kernels.run(sc, should_stop=lambda: next(polls))
     assert part.status == "cancelled" and part.steps == 20
