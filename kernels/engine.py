@@ -81,6 +81,10 @@ def run(
             if on_progress is not None and now - last_progress >= PROGRESS_INTERVAL:
                 last_progress = now
                 on_progress(done, steps)
+        # The final state, observed (its grid build may still find a runaway) and recorded.
+        if not series["step"] or series["step"][-1] != done:
+            observe(done)
+        record(done)
     except SimulationDiverged as exc:
         status = "diverged"
         error = {
@@ -90,12 +94,8 @@ def run(
             "cause": exc.cause,
             "message": str(exc),
         }
-    if status != "diverged":
-        if not series["step"] or series["step"][-1] != done:
-            observe(done)
-        record(done)
-        if on_progress is not None:
-            on_progress(done, steps)
+    if status != "diverged" and on_progress is not None:
+        on_progress(done, steps)
     wall = time.perf_counter() - t0
     chosen = rec.observables
     obs = {k: np.asarray(v, dtype=np.float64) for k, v in series.items()
