@@ -201,11 +201,11 @@ def advance_kernel(rule: int, periodic: bool):
         return a
 
     @ti.func
-    def sums(k, a0, n, c0, nx, ny, Lb, r2, links: ti.template(), graph, track,
-             ps: ti.template(),
-             cell: ti.template(), cstart: ti.template(), cidx: ti.template(),
+    def sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, links: ti.template(), graph, track,
+             ps: ti.template(), cstart: ti.template(), cidx: ti.template(),
              parent: ti.template(), parent_u: ti.template()):
-        """(sum of the terms, 0, count) over slot k's closed neighbourhood: every slot
+        """(sum of the terms, 0, count) over slot k's closed neighbourhood (k in cell
+        (cx, cy)): every slot
         (minimum image) without a grid, else the 3x3 block of cells around it; periodic
         images are shifted by +-L per run of slots, never tested per pair."""
         a = ti.math.vec3(0.0)
@@ -216,9 +216,6 @@ def advance_kernel(rule: int, periodic: bool):
                     d -= Lb * ti.round(d / Lb)
                 a = add(k, m, d, a, r2, links, ps, cidx, parent, parent_u, graph, track)
         else:
-            cc = cell[cidx[k]]
-            cx = cc % nx
-            cy = cc // nx
             # Each row of the 3x3 block is one contiguous run of slots (cells cx-1 .. cx+1,
             # clipped to the row) plus, across a periodic seam, the wrapped cell's run,
             # shifted by -+L. A runtime loop over the rows keeps the inlined code small:
@@ -372,7 +369,7 @@ def advance_kernel(rule: int, periodic: bool):
         if ti.static(vicsek):
             nrm = ti.sqrt(acc[0] * acc[0] + acc[1] * acc[1])
             if nrm > 0.0:  # arg(0) = 0, as atan2(0, 0)
-                e_new = ti.math.vec2(acc[0], acc[1]) / nrm
+                e_new = ti.math.vec2(acc[0], acc[1]) * (1.0 / nrm)
         elif ti.static(rule == RULES["laplacian"]):
             new = th - (acc[2] * th - acc[0]) / prm[b, G]  # eq. 18
         else:
@@ -396,10 +393,11 @@ def advance_kernel(rule: int, periodic: bool):
             e = e_new
         x = ti.math.vec2(ps[k, 0], ps[k, 1]) + prm[b, V0DT] * e
         if ti.static(periodic):
-            x -= Lb * ti.floor(x / Lb)
             for c in ti.static(range(2)):
-                if x[c] >= Lb:  # x - L floor(x / L) can round up to L itself
-                    x[c] -= Lb
+                if x[c] < 0.0 or x[c] >= Lb:  # wrapped only when it left the box
+                    x[c] -= Lb * ti.floor(x[c] / Lb)
+                    if x[c] >= Lb:  # x - L floor(x / L) can round up to L itself
+                        x[c] -= Lb
         pos[i, 0] = x[0]
         pos[i, 1] = x[1]
         ew[i, 0] = e_new[0]
@@ -439,17 +437,26 @@ def advance_kernel(rule: int, periodic: bool):
                     ny = nxy[1]
                     tracking = track and s < steps
                     bad = 0
+                    cx = 0  # slot k's cell, followed along the slots (they are in cell
+                    cy = 0  # order): no division per agent
+                    cend = a0 + cstart[c0 + 1] if nx > 0 else a0 + n
                     for k in range(a0, a0 + n):
                         # X(s + 1) is written over X(s) in id order as we go: the visit
                         # reads only the slot-order copy, so the update stays synchronous.
+                        while k >= cend:
+                            cx += 1
+                            if cx == nx:
+                                cx = 0
+                                cy += 1
+                            cend = a0 + cstart[c0 + cx + nx * cy + 1]
                         i = cidx[k]
                         acc = ti.math.vec3(0.0)
                         if graph or tracking:  # the components and Theorem 2's forest
-                            acc = sums(k, a0, n, c0, nx, ny, Lb, r2, True, graph, tracking,
-                                       ps, cell, cstart, cidx, parent, parent_u)
+                            acc = sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, True, graph,
+                                       tracking, ps, cstart, cidx, parent, parent_u)
                         else:
-                            acc = sums(k, a0, n, c0, nx, ny, Lb, r2, False, graph, tracking,
-                                       ps, cell, cstart, cidx, parent, parent_u)
+                            acc = sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, False, graph,
+                                       tracking, ps, cstart, cidx, parent, parent_u)
                         deg[k] = ti.cast(acc[2], ti.i32) - 1  # the closed set holds i
                         if s < steps:
                             bad |= update(b, i, k, s, a0, acc, Lb, prm, iprm, kseed, ps, pos,
