@@ -472,9 +472,8 @@ def advance_kernel(mode: int):
                        iprm: ti.template(), ps: ti.template(), cell: ti.template(),
                        cstart: ti.template(), cidx: ti.template(), parent: ti.template(),
                        csum: ti.template(), lo: ti.template(), hi: ti.template(),
-                       opos: ti.template(), orad: ti.template(), ostart: ti.template(),
-                       obs: ti.template(), val: ti.template(), snap: ti.template(),
-                       sbase: ti.template()):
+                       mis: ti.template(), obs: ti.template(), val: ti.template(),
+                       snap: ti.template(), sbase: ti.template()):
         """The switching observables of X(s) (ps in slot order) into obs[row], the
         valencies of observation `nrow` into val, and (for lambda_2) the snapshot of
         (r, R_i) in id order."""
@@ -530,7 +529,7 @@ def advance_kernel(mode: int):
             qc = 0.0
             for k in range(a0, a0 + n):
                 x = ti.math.vec2(ps[k, 0], ps[k, 1])
-                nv = navigation(b, x, prm, iprm, opos, orad, ostart)
+                nv = ti.math.vec4(mis[k, 0], mis[k, 1], mis[k, 2], mis[k, 3])
                 msum += nv[0]
                 if nv[0] <= prm[b, VMIN]:
                     inside += 1
@@ -589,7 +588,7 @@ def advance_kernel(mode: int):
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, aoff: nd, coff: nd, ooff: nd, prm: nd, iprm: nd,
                 pos: nd, vel: nd, rad: nd, ps: nd, cell: nd, cstart: nd, cidx: nd,
-                parent: nd, csum: nd, arc_lo: nd, arc_hi: nd, ptr: nd, idx: nd, opos: nd,
+                parent: nd, csum: nd, mis: nd, arc_lo: nd, arc_hi: nd, ptr: nd, idx: nd, opos: nd,
                 orad: nd, ostart: nd, obs: nd, val: nd, snap: nd, sbase: nd):
         for t in range((aoff.shape[0] - 1) * SPREAD):
             if t % SPREAD == 0:  # one replica per CPU task
@@ -636,6 +635,12 @@ def advance_kernel(mode: int):
                         ps[k, 3] = vel[i, 1]
                         if ti.static(mission):
                             ps[k, 4] = rad[i]
+                    if ti.static(mission):  # V_i at r(s): read by all three passes below
+                        for k in range(a0, a0 + n):
+                            nv = navigation(b, ti.math.vec2(ps[k, 0], ps[k, 1]), prm, iprm,
+                                            opos, orad, ostart)
+                            for c in ti.static(range(4)):
+                                mis[k, c] = nv[c]
                     if graph:
                         row = ooff[b] + iprm[b, NOBS]
                         obs[row, 0] = s
@@ -645,7 +650,7 @@ def advance_kernel(mode: int):
                         else:
                             observe_metric(b, a0, n, c0, nx, ny, w, row, iprm[b, NOBS], q, prm,
                                            iprm, ps, cell, cstart, cidx, parent, csum,
-                                           arc_lo, arc_hi, opos, orad, ostart, obs, val,
+                                           arc_lo, arc_hi, mis, obs, val,
                                            snap, sbase)
                         iprm[b, NOBS] += 1
                     if s < steps:
@@ -659,9 +664,7 @@ def advance_kernel(mode: int):
                                     r = ps[k, 4]
                                     v2 = ps[k, 2] * ps[k, 2] + ps[k, 3] * ps[k, 3]
                                     new = r
-                                    nv = navigation(b, ti.math.vec2(ps[k, 0], ps[k, 1]), prm,
-                                                    iprm, opos, orad, ostart)
-                                    if v2 < prm[b, STUCK2] and nv[0] > prm[b, VMIN]:
+                                    if v2 < prm[b, STUCK2] and mis[k, 0] > prm[b, VMIN]:
                                         new = ti.max(0.5 * r, prm[b, FLOOR])
                                         if new < r:
                                             halved += 1
@@ -698,11 +701,11 @@ def advance_kernel(mode: int):
                                                   ps, cell, cstart, cidx, ti.static((parent,)))
                                 u = ti.math.vec2(acc[0], acc[1]) - acc[2] * vi
                             if ti.static(mission):
-                                nv = navigation(b, xi, prm, iprm, opos, orad, ostart)
-                                u -= ti.math.vec2(nv[1], nv[2])
+                                u -= ti.math.vec2(mis[k, 1], mis[k, 2])
                                 damp = iprm[b, DAMP]
-                                if damp == 3 or (damp == 1 and nv[0] > prm[b, VMIN]) or (
-                                        damp == 2 and nv[0] <= prm[b, VMIN]):
+                                vm = mis[k, 0]
+                                if damp == 3 or (damp == 1 and vm > prm[b, VMIN]) or (
+                                        damp == 2 and vm <= prm[b, VMIN]):
                                     u -= prm[b, CD] * vi
                             v = vi + dt * u
                             x = xi + dt * v
@@ -898,7 +901,8 @@ class FlockingBatch:
             prm=arr(prm), iprm=arr(iprm, i32), pos=arr(pos), vel=arr(vel), rad=arr(rad),
             ps=scratch((total, 5)), cell=scratch(total, i32),
             cstart=scratch(int(self.coff[-1]), i32), cidx=scratch(total, i32),
-            parent=scratch(total, i32), csum=scratch((total, 3)), arc_lo=scratch(total),
+            parent=scratch(total, i32), csum=scratch((total, 3)),
+            mis=scratch((total if mission else 1, 4)), arc_lo=scratch(total),
             arc_hi=scratch(total), ptr=arr(ptr_all.astype(np.int32), i32),
             idx=arr(cat(idx, 1, np.int32), i32),
             opos=arr(np.concatenate(opos) if n_obst else np.zeros((1, 2))),
