@@ -184,7 +184,7 @@ def make_visit(pair):
                 row = cy + dy
                 if row >= 0 and row < ny:
                     base = c0 + row * nx
-                    for m in range(cstart[base + xlo], cstart[base + xhi + 1]):
+                    for m in range(a0 + cstart[base + xlo], a0 + cstart[base + xhi + 1]):
                         d = ti.math.vec2(ps[m, 0] - xk[0], ps[m, 1] - xk[1])
                         acc = pair(k, m, d, acc, q, ps, S)
         return acc
@@ -424,7 +424,7 @@ def advance_kernel(mode: int):
                         row = cy + dy
                         if row >= 0 and row < ny:
                             base = c0 + row * nx
-                            for m in range(cstart[base + xlo], cstart[base + xhi + 1]):
+                            for m in range(a0 + cstart[base + xlo], a0 + cstart[base + xhi + 1]):
                                 j = cidx[m]
                                 if j != i:
                                     d = ti.math.vec2(ps[j, 0] - ps[i, 0], ps[j, 1] - ps[i, 1])
