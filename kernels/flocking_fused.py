@@ -108,13 +108,24 @@ def _nonfinite(x, v):
 
 
 @ti.func
-def build_cells(a0, n, c0, cap, w0, src: ti.template(), cell: ti.template(),
-                cstart: ti.template(), cidx: ti.template()):
+def _bucket(cx, cy, nb):
+    """The hashed bucket of cell (cx, cy) among nb (as kernels/grid.py's plane buckets)."""
+    h = (ti.cast(cx, ti.u32) * ti.u32(73856093)) ^ (ti.cast(cy, ti.u32) * ti.u32(19349663))
+    h ^= h >> ti.u32(13)
+    return ti.cast(h % ti.cast(nb, ti.u32), ti.i32)
+
+
+@ti.func
+def build_cells(a0, n, c0, cap, w0, src: ti.template(), may_hash: ti.template(),
+                cell: ti.template(), cstart: ti.template(), cidx: ti.template()):
     """Cell list of the replica's agents at src (id order, rows a0 .. a0 + n): cidx[a0 + k]
     is the agent in slot k, slots in cell order and, within a cell, in id order (a stable
     counting sort); cell c holds slots cstart[c0 + c] .. cstart[c0 + c + 1]. Cells of side
-    w0, widened until they fit the replica's budget `cap`. Returns Grid; cells across = 0:
-    under three cells each way (visit all pairs), -1: the swarm ran away (or NaN)."""
+    w0 numbered row by row over the bounding box while that fits the replica's budget of
+    `cap` cells; a sprawling swarm (a pair blown apart by the 1/s^2 repulsion, say) gets
+    `cap` hashed buckets of the same cells (may_hash), or cells widened until they fit.
+    Returns Grid: cells across = 0: under three cells each way (visit all pairs), -1: the
+    swarm ran away (or NaN); hashed: (cap, -1)."""
     lo = ti.math.vec2(ti.math.inf)
     hi = ti.math.vec2(-ti.math.inf)
     for i in range(a0, a0 + n):
@@ -125,34 +136,50 @@ def build_cells(a0, n, c0, cap, w0, src: ti.template(), cell: ti.template(),
     w = w0
     nx = 0
     ny = 0
+    hashed = 0
     span = ti.max(ext[0], ext[1])
     if not (span < MAX_CELLS_ACROSS * w):  # NaN included
         nx = -1
     if nx == 0:
-        while (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
-            w *= 2.0
-        nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
-        ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
-        if nx < 3 and ny < 3:
-            nx = 0
+        if (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
+            if ti.static(may_hash):
+                hashed = 1
+            else:
+                while (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
+                    w *= 2.0
+        if hashed:
+            nx = cap
+            ny = -1
+        else:
+            nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
+            ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
+            if nx < 3 and ny < 3:
+                nx = 0
     if nx > 0:
-        for c in range(c0, c0 + nx * ny + 1):
+        nb = nx * ny
+        if hashed:
+            nb = cap
+        for c in range(c0, c0 + nb + 1):
             cstart[c] = 0
         for i in range(a0, a0 + n):
-            cx = ti.min(ti.cast(ti.floor((src[i, 0] - lo[0]) / w), ti.i32), nx - 1)
-            cy = ti.min(ti.cast(ti.floor((src[i, 1] - lo[1]) / w), ti.i32), ny - 1)
-            cc = ti.max(cx, 0) + nx * ti.max(cy, 0)
+            cx = ti.cast(ti.floor((src[i, 0] - lo[0]) / w), ti.i32)
+            cy = ti.cast(ti.floor((src[i, 1] - lo[1]) / w), ti.i32)
+            cc = 0
+            if hashed:
+                cc = _bucket(cx, cy, nb)
+            else:
+                cc = ti.max(ti.min(cx, nx - 1), 0) + nx * ti.max(ti.min(cy, ny - 1), 0)
             cell[i] = cc
             cstart[c0 + cc + 1] += 1
-        for c in range(c0 + 1, c0 + nx * ny + 1):
+        for c in range(c0 + 1, c0 + nb + 1):
             cstart[c] += cstart[c - 1]
         for i in range(a0, a0 + n):  # cstart[c] as the fill pointer of cell c
             slot = c0 + cell[i]
             k = cstart[slot]
             cidx[a0 + k] = i
             cstart[slot] = k + 1
-        for m in range(nx * ny):  # shift back: start[c] = end[c - 1], from the top
-            c = c0 + nx * ny - m
+        for m in range(nb):  # shift back: start[c] = end[c - 1], from the top
+            c = c0 + nb - m
             cstart[c] = cstart[c - 1]
         cstart[c0] = 0
     elif nx == 0:
@@ -163,8 +190,9 @@ def build_cells(a0, n, c0, cap, w0, src: ti.template(), cell: ti.template(),
 
 def make_visit(pair):
     """visit(k, ...) folding acc = pair(k, m, d, acc, q, ps, S) over slot k's candidates,
-    d = r_m - r_k: every slot of the replica (cells across = 0), or the 3x3 cells around
-    slot k read as three contiguous rows of slots."""
+    d = r_m - r_k: every slot of the replica (cells across = 0), the 3x3 cells around
+    slot k read as three contiguous rows of slots, or (hashed, ny < 0) the buckets of the
+    3x3 cells, each slot checked against its exact cell (ps columns 5, 6)."""
 
     @ti.func
     def visit(k, a0, n, c0, nx, ny, acc, q, ps: ti.template(), cell: ti.template(),
@@ -174,6 +202,16 @@ def make_visit(pair):
             for m in range(a0, a0 + n):
                 d = ti.math.vec2(ps[m, 0] - xk[0], ps[m, 1] - xk[1])
                 acc = pair(k, m, d, acc, q, ps, S)
+        elif ny < 0:
+            cx = ps[k, 5]
+            cy = ps[k, 6]
+            for dy in ti.static(range(-1, 2)):
+                for dx in ti.static(range(-1, 2)):
+                    bk = c0 + _bucket(ti.cast(cx, ti.i32) + dx, ti.cast(cy, ti.i32) + dy, nx)
+                    for m in range(a0 + cstart[bk], a0 + cstart[bk + 1]):
+                        if ps[m, 5] == cx + dx and ps[m, 6] == cy + dy:
+                            d = ti.math.vec2(ps[m, 0] - xk[0], ps[m, 1] - xk[1])
+                            acc = pair(k, m, d, acc, q, ps, S)
         else:
             cc = cell[cidx[k]]
             cx = cc % nx
@@ -405,7 +443,7 @@ def advance_kernel(mode: int):
         best = ti.math.vec3(NEAREST_NONE, a0, a0)
         done = False
         while not done:
-            g = build_cells(a0, n, c0, cap, w, ps, cell, cstart, cidx)
+            g = build_cells(a0, n, c0, cap, w, ps, False, cell, cstart, cidx)
             nx = ti.cast(g[0], ti.i32)
             ny = ti.cast(g[1], ti.i32)
             best = ti.math.vec3(NEAREST_NONE, a0, a0)
@@ -609,9 +647,11 @@ def advance_kernel(mode: int):
                     nx = 0
                     ny = 0
                     w = 0.0
+                    ox = 0.0
+                    oy = 0.0
                     if ti.static(not fixed):
                         if iprm[b, CELLS]:
-                            g = build_cells(a0, n, c0, cap, prm[b, R] * _WIDEN, pos,
+                            g = build_cells(a0, n, c0, cap, prm[b, R] * _WIDEN, pos, True,
                                             cell, cstart, cidx)
                             if g[0] < 0:
                                 iprm[b, BAD] = s
@@ -621,6 +661,8 @@ def advance_kernel(mode: int):
                             nx = ti.cast(g[0], ti.i32)
                             ny = ti.cast(g[1], ti.i32)
                             w = g[2]
+                            ox = g[3]
+                            oy = g[4]
                         else:
                             for k in range(n):
                                 cidx[a0 + k] = a0 + k
@@ -635,6 +677,9 @@ def advance_kernel(mode: int):
                         ps[k, 3] = vel[i, 1]
                         if ti.static(mission):
                             ps[k, 4] = rad[i]
+                        if ny < 0:  # hashed: each slot's exact cell
+                            ps[k, 5] = ti.floor((pos[i, 0] - ox) / w)
+                            ps[k, 6] = ti.floor((pos[i, 1] - oy) / w)
                     if ti.static(mission):  # V_i at r(s): read by all three passes below
                         for k in range(a0, a0 + n):
                             nv = navigation(b, ti.math.vec2(ps[k, 0], ps[k, 1]), prm, iprm,
@@ -798,7 +843,7 @@ class FlockingBatch:
         B = len(scenarios)
         ns = [s.n_agents for s in scenarios]
         self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
-        caps = [2 * n + 16 for n in ns]  # cells per replica (the cell budget) + 1
+        caps = [4 * n + 16 for n in ns]  # cells per replica (the cell budget) + 1
         self.coff = np.concatenate([[0], np.cumsum(np.add(caps, 1))]).astype(np.int32)
         rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
         self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
@@ -899,7 +944,7 @@ class FlockingBatch:
         self.args = dict(
             aoff=arr(self.aoff, i32), coff=arr(self.coff, i32), ooff=arr(self.ooff, i32),
             prm=arr(prm), iprm=arr(iprm, i32), pos=arr(pos), vel=arr(vel), rad=arr(rad),
-            ps=scratch((total, 5)), cell=scratch(total, i32),
+            ps=scratch((total, 7)), cell=scratch(total, i32),
             cstart=scratch(int(self.coff[-1]), i32), cidx=scratch(total, i32),
             parent=scratch(total, i32), csum=scratch((total, 3)),
             mis=scratch((total if mission else 1, 4)), arc_lo=scratch(total),

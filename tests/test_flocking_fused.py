@@ -34,6 +34,16 @@ def obstacles_world(n: int, seed: int, **model) -> Scenario:
     return m3_scenario(n=n, steps=60, seed=seed, **model)
 
 
+def sprawling(n: int = 70) -> Scenario:
+    """Two flocks 1000 apart: more cells than the budget, so hashed buckets."""
+    init = lattice(n, 1.1, 3)
+    init["positions"][n - 10:] = [[1000.0 + 1.1 * i, -500.0] for i in range(10)]
+    return Scenario.model_validate({
+        "model": {"kind": "flocking"}, "space": {"kind": "plane"},
+        "neighbours": {"radius": 2.0}, "initial": init, "time": {"steps": 20, "dt": 0.01},
+    })
+
+
 # Mixes a sweep would batch together: different N (all pairs and cells), graphs, radii,
 # obstacles, steps, seeds and observation cadences.
 MIXES = {
@@ -49,6 +59,7 @@ MIXES = {
         with_recording(m2_scenario(n=40, steps=37, seed=3, R=1.6, inclusive=True,
                                    search="grid"), observables_every=3),
         m2_scenario(n=70, steps=25, seed=4, search="all_pairs"),
+        sprawling(),
     ],
     "mission": [
         obstacles_world(5, 1),
