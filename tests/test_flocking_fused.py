@@ -165,3 +165,20 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     mixed = [euler, rk4, MIXES["fixed"][0], euler, MIXES["mission"][0]]
     assert sorted(map(sorted, engine._batches(mixed))) == [[0, 3], [1], [2], [4]]
     assert kernels.run(rk4).extra["engine_path"] == "per_step"
+
+
+def test_a_runaway_swarm_is_reported_as_the_per_step_path_reports_it(taichi_cpu, monkeypatch):
+    """A pair 1e-6 apart is blown 4e14 apart in one step: the cell list refuses a swarm
+    over 2^30 radii wide, at the same step and in the same words on both paths."""
+    init = lattice(80, 1.1, 3)
+    init["positions"][1] = [init["positions"][0][0] + 1e-6, init["positions"][0][1]]
+    sc = Scenario.model_validate({
+        "model": {"kind": "flocking"}, "space": {"kind": "plane"},
+        "neighbours": {"radius": 2.0}, "initial": init, "time": {"steps": 20, "dt": 0.01},
+    })
+    fused = kernels.run(sc)
+    monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+    per_step = kernels.run(sc)
+    assert fused.extra["engine_path"] == "fused" and fused.status == "diverged"
+    assert fused.error == per_step.error
+    assert fused.error["step"] == 1 and "2^30 neighbour radii" in fused.error["cause"]
