@@ -12,8 +12,9 @@ Per replica and step s (state X(s) = (r, v[, R_i]) in agent-id order), semi-impl
 Euler:
   1. switching/M3: a cell list of r(s) over its bounding box (cells of side R, the initial
      radius, which bounds every R_i; a stable counting sort, so every sum has one fixed
-     order), or all pairs when `neighbour_search` says so ("auto": N <= 64) or the box is
-     under three cells across; the slot-order copy of X(s) is what every visit reads;
+     order; hashed buckets of the same cells when the box needs over 4 N + 16 of them), or
+     all pairs when `neighbour_search` says so ("auto": N <= 64) or the box is under three
+     cells across; the slot-order copy of X(s) is what every visit reads;
   2. on an observation step, the observables of X(s) (one more visit: valencies, the
      union-find of the graph, the saturated potential, the closest pair);
   3. M3 at s > 0, s % radius_every == 0: the adaptive radius of eq. 4, synchronously;
