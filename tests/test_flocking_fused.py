@@ -70,6 +70,13 @@ MIXES = {
 }
 
 
+def fixed_windows(monkeypatch, agent_steps: int) -> None:
+    """Windows of a fixed number of agent-steps (where the driver sizes later windows by
+    their measured time, WINDOW_SECONDS, that is turned off too)."""
+    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", agent_steps)
+    monkeypatch.setattr(batch, "WINDOW_SECONDS", None, raising=False)
+
+
 def same_result(a, b):
     assert a.status == b.status and a.steps == b.steps
     assert list(a.observables) == list(b.observables)
@@ -118,7 +125,7 @@ def test_windows_frames_and_snapshot_launches_do_not_change_a_bit(taichi_cpu, mo
     sink = Frames()
     framed = kernels.run(with_recording(sc, every=7), sink=sink)
     assert sink.steps == [*range(0, 30, 7), 30]
-    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", 100 * 3)  # windows of 3 steps
+    fixed_windows(monkeypatch, 100 * 3)  # windows of 3 steps
     cut = kernels.run(sc)
     monkeypatch.setattr(flocking_fused, "SNAP_DOUBLES", 1)  # lambda_2 every launch of 1 step
     snapped = kernels.run(sc)
@@ -130,7 +137,7 @@ def test_windows_frames_and_snapshot_launches_do_not_change_a_bit(taichi_cpu, mo
 def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, monkeypatch):
     sc = MIXES["mission"][1]
     whole = kernels.run(sc)
-    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", sc.n_agents * 10)  # windows of 10
+    fixed_windows(monkeypatch, sc.n_agents * 10)  # windows of 10 steps
     polls = iter([False, True])
     part = kernels.run(sc, should_stop=lambda: next(polls))
     assert part.status == "cancelled" and part.steps == 20
