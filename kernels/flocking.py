@@ -39,6 +39,7 @@ from .flocking_forces import (
     grid_observe_kernel,
     root_labels,
 )
+from .flocking_fused import FlockingBatch
 from .flocking_grid import PlaneGrid
 from .flocking_navigation import NAV_SIZE, ObstacleGrid
 from .graph import count_roots, reset_parent
@@ -67,6 +68,7 @@ def _i32(*shape: int) -> ti.Ndarray:
 @register_kernel
 class FlockingKernel(ModelKernel):
     kind = "flocking"
+    batch = FlockingBatch  # M2 and M3 (inherited) on the fused small-N path
 
     def __init__(self, scenario: Scenario):
         super().__init__(scenario)

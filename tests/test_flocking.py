@@ -16,12 +16,21 @@ import kernels
 from kernels.topology import build_edges, to_csr
 from schemas import PRESETS, Scenario
 from schemas.flocking import GraphSpec
-from tests.test_flocking_reference import lattice, m2_scenario, make_kernel, pair_geometry
+from tests import test_flocking_reference as reference
+from tests.test_flocking_reference import (
+    fused_or_skip,
+    lattice,
+    m2_scenario,
+    make_kernel,
+    pair_geometry,
+)
+
+path = reference.path  # the fixture: both engine paths
 
 
-def run_states(sc: Scenario, every: int = 1):
+def run_states(sc: Scenario, every: int = 1, path: str = "per_step"):
     """Step the kernel, yielding (step, kernel) every `every` steps (and at step 0)."""
-    k = make_kernel(sc)
+    k = make_kernel(sc, path=path)
     yield 0, k
     for step in range(sc.time.steps):
         k.step(step)
@@ -43,11 +52,13 @@ def preset(name: str, **recording) -> Scenario:
     dict(topology="switching", search="grid"),
     dict(topology="switching", search="all_pairs", integrator="rk4"),
 ], ids=lambda c: "-".join(str(v) for v in c.values()))
-def test_mean_velocity_is_conserved(taichi_cpu, case):
+def test_mean_velocity_is_conserved(path, case):
     """Without obstacles every pair term of eq. 3 is antisymmetric, so sum_i u_i = 0:
     the mean velocity stays put up to rounding (1e-13 over 500 steps)."""
     sc = m2_scenario(n=30, steps=500, speed=1.0, **case)
-    means = [k.frame(["velocity"])["velocity"].mean(axis=0) for _, k in run_states(sc, 50)]
+    fused_or_skip(path, sc)
+    means = [k.frame(["velocity"])["velocity"].mean(axis=0)
+             for _, k in run_states(sc, 50, path)]
     drift = np.abs(np.array(means) - means[0]).max()
     assert drift < 1e-13, drift
     assert np.abs(means[0]).max() > 1e-3
@@ -88,19 +99,19 @@ def test_switching_q_never_increases(taichi_cpu):
     assert np.any(np.diff(np.array(valency), axis=0) != 0)  # the topology did switch
 
 
-def test_tree_settles_at_potential_minimiser(taichi_cpu):
+def test_tree_settles_at_potential_minimiser(path):
     """Corollary 1: on a tree every edge length converges to the minimiser d of V."""
     d = 1.3
     sc = m2_scenario("fixed", n=9, steps=6000, dt=0.01, d=d, speed=0.5,
                      graph={"kind": "tree", "seed": 4})
-    *_, (_, k) = run_states(sc, sc.time.steps)
+    *_, (_, k) = run_states(sc, sc.time.steps, path)
     u, v = build_edges(sc.model.graph, sc.n_agents, sc.seed)
     x = k.frame(["position"])["position"]
     lengths = np.hypot(*(x[u] - x[v]).T)
     np.testing.assert_allclose(lengths, d, atol=1e-6)
 
 
-def test_complete_graph_synchronises_faster_than_path(taichi_cpu):
+def test_complete_graph_synchronises_faster_than_path(path):
     """Corollary 2: more algebraic connectivity, faster velocity synchronisation. The
     potential terms act as disturbances (the complete graph's distances are frustrated, so
     it keeps a small residue), so the claim is tested on the transient: the complete graph
@@ -110,22 +121,23 @@ def test_complete_graph_synchronises_faster_than_path(taichi_cpu):
     for kind in ("complete", "path"):
         sc = m2_scenario("fixed", n=10, steps=1500, graph={"kind": kind}, speed=1.0)
         series = [(k.observe(s)["velocity_disagreement"], k.observe(s)["lambda2"])
-                  for s, k in run_states(sc, 10)]
+                  for s, k in run_states(sc, 10, path)]
         out[kind] = np.array(series)
-    complete, path = out["complete"], out["path"]
-    np.testing.assert_allclose(complete[0, 0], path[0, 0])  # the same initial state
+    complete, chain = out["complete"], out["path"]
+    np.testing.assert_allclose(complete[0, 0], chain[0, 0])  # the same initial state
     assert complete[0, 1] == pytest.approx(10.0)  # lambda_2(K_N) = N
-    assert path[0, 1] == pytest.approx(2 * (1 - np.cos(np.pi / 10)))
+    assert chain[0, 1] == pytest.approx(2 * (1 - np.cos(np.pi / 10)))
     first = {kind: np.argmax(s[:, 0] < 1e-2) for kind, s in out.items()}
     assert 0 < first["complete"] < first["path"]
     for t in (50, 100):  # observations every 0.1 s
-        assert complete[t, 0] < 0.1 * path[t, 0]
+        assert complete[t, 0] < 0.1 * chain[t, 0]
 
 
-def test_switching_preset_flocks_without_collisions(taichi_cpu):
+def test_switching_preset_flocks_without_collisions(path):
     """Paper 000, section 6: velocities synchronised by t = 100 s; no collisions."""
     result = kernels.run(preset("tjp-switching", observables_every=10))
     assert result.status == "completed", result.error
+    assert result.extra["engine_path"] == path
     obs = result.observables
     assert obs["time"][-1] == pytest.approx(100.0)
     assert obs["velocity_disagreement"][-1] < 1e-10
@@ -137,10 +149,11 @@ def test_switching_preset_flocks_without_collisions(taichi_cpu):
     json.dumps(result.summary(), allow_nan=False)
 
 
-def test_fixed_preset_flocks(taichi_cpu):
+def test_fixed_preset_flocks(path):
     """Paper 000, Fig. 4/7: a connected random graph synchronises the velocities; W falls."""
     result = kernels.run(preset("tjp-fixed", observables_every=50))
     assert result.status == "completed", result.error
+    assert result.extra["engine_path"] == path
     obs = result.observables
     assert result.extra["graph"]["components"] == 1
     assert obs["velocity_disagreement"][-1] < 1e-10
@@ -153,9 +166,9 @@ def test_fixed_preset_flocks(taichi_cpu):
 # --- observables against brute force ----------------------------------------------------------
 
 @pytest.mark.parametrize("search", ["grid", "all_pairs"])
-def test_switching_observables_match_brute_force(taichi_cpu, search):
+def test_switching_observables_match_brute_force(path, search):
     sc = m2_scenario("switching", n=30, steps=30, R=1.8, spacing=1.0, speed=1.0, search=search)
-    *_, (step, k) = run_states(sc, sc.time.steps)
+    *_, (step, k) = run_states(sc, sc.time.steps, path)
     obs = k.observe(step)
     f = k.frame(["position", "velocity"])
     x, v = f["position"], f["velocity"]
@@ -181,20 +194,20 @@ def test_switching_observables_match_brute_force(taichi_cpu, search):
     assert obs["speed_max"] == pytest.approx(np.hypot(*v.T).max(), rel=1e-12)
 
 
-def test_large_n_reports_histograms_and_skips_lambda2(taichi_cpu):
+def test_large_n_reports_histograms_and_skips_lambda2(path):
     sc = Scenario.model_validate({
         "model": {"kind": "flocking", "valency_per_agent_max": 10, "lambda2_max_agents": 20},
         "space": {"kind": "plane"}, "neighbours": {"radius": 2.0},
         "initial": lattice(100, 1.0, 3), "time": {"steps": 2, "dt": 0.01},
     })
-    obs = make_kernel(sc).observe(0)
+    obs = make_kernel(sc, path=path).observe(0)
     assert obs["lambda2"] == -1.0
     assert "valency_0" not in obs
     hist = [obs[f"valency_hist_{b}"] for b in range(16)] + [obs["valency_hist_16plus"]]
     assert sum(hist) == 100
 
 
-def test_overlapping_agents_diverge_with_a_clear_error(taichi_cpu):
+def test_overlapping_agents_diverge_with_a_clear_error(path):
     sc = Scenario.model_validate({
         "model": {"kind": "flocking"}, "space": {"kind": "plane"},
         "neighbours": {"radius": 2.0},
@@ -202,7 +215,7 @@ def test_overlapping_agents_diverge_with_a_clear_error(taichi_cpu):
         "time": {"steps": 5, "dt": 0.01},
     })
     result = kernels.run(sc)
-    assert result.status == "diverged"
+    assert result.status == "diverged" and result.extra["engine_path"] == path
     assert result.error["step"] == 0
     assert "same point" in result.error["cause"]
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import kernels
+from kernels.flocking_fused import FlockingBatch
 from kernels.models import KERNELS
 from schemas import Scenario
 
@@ -197,8 +199,68 @@ def m3_scenario(n=12, steps=200, dt=0.01, R=2.0, seed=7, **model) -> Scenario:
     })
 
 
-def make_kernel(sc: Scenario, hashed: bool = False):
-    """The scenario's kernel; hashed: never use the dense plane grid (test the engine's)."""
+@pytest.fixture(params=["fused", "per_step"])
+def path(request, monkeypatch, taichi_cpu):
+    """Run the test on both engine paths: the fused small-N one (kernels/flocking_fused.py,
+    where the engine takes it) and the per-step one (forced by lowering the fused path's
+    size limit). Pass it on to `make_kernel`."""
+    if request.param == "per_step":
+        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
+    return request.param
+
+
+class FusedKernel:
+    """The per-step kernel's test interface (step, observe, frame, extra, the radii) over a
+    fused batch of one replica observed at every step."""
+
+    def __init__(self, sc: Scenario):
+        spec = sc.model_dump(mode="json")
+        spec["recording"]["observables_every"] = 1
+        self.batch = FlockingBatch([Scenario.model_validate(spec)])
+        self.done = 0  # steps advanced
+        self.state = self
+        self.n = sc.n_agents
+        self.indptr, self.indices = self.batch.args["ptr"], self.batch.args["idx"]  # fixed
+
+    def step(self, step: int) -> None:
+        assert step <= self.done, "steps in order"
+        if step == self.done:
+            self.batch.advance(step, step + 1)
+            self.done = step + 1
+        div = self.batch.divergence(0, self.batch.status())
+        if div is not None:
+            raise kernels.SimulationDiverged(*div)
+
+    def observe(self, step: int) -> dict[str, float]:
+        if step == self.done:  # X(step) is observed by the launch that steps it
+            self.step(step)
+        obs = self.batch.observables(0, self.batch.status())
+        (row,) = np.nonzero(obs["step"] == step)[0]
+        return {k: float(v[row]) for k, v in obs.items() if k != "step"}
+
+    def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
+        return self.batch.frame(0, arrays)
+
+    def extra(self):
+        return self.batch.extra(0, self.batch.status())
+
+    def in_id_order(self, name: str) -> np.ndarray:
+        assert name == "rad"
+        return self.batch.args["rad"].to_numpy()
+
+
+def fused_or_skip(path: str, sc: Scenario, variant: bool = False) -> None:
+    """Skip the fused run of a per-step variant (rk4, M3's radius_rule min: the engine
+    runs them per step; variant: the hashed grid, a per-step concept)."""
+    if path == "fused" and (variant or kernels.engine.fused_batch(sc, "cpu") is None):
+        pytest.skip("a per-step path variant")
+
+
+def make_kernel(sc: Scenario, hashed: bool = False, path: str = "per_step"):
+    """The scenario's kernel; hashed: never use the dense plane grid (test the engine's).
+    path "fused": the fused batch where the engine would take it (`FusedKernel`)."""
+    if path == "fused" and kernels.engine.fused_batch(sc, "cpu") is not None:
+        return FusedKernel(sc)
     k = KERNELS[sc.model.kind](sc)
     if hashed:
         for g in (k.grid, k.stage_grid):
@@ -238,9 +300,10 @@ M2_CASES = [
 
 
 @pytest.mark.parametrize("case", M2_CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
-def test_m2_matches_reference_step_by_step(taichi_cpu, case):
+def test_m2_matches_reference_step_by_step(path, case):
     sc = m2_scenario(**case)
-    k = make_kernel(sc, hashed=case.get("search") == "hash")
+    fused_or_skip(path, sc, case.get("search") == "hash")
+    k = make_kernel(sc, hashed=case.get("search") == "hash", path=path)
     x, v = state(k)
     a, _ = sc.model.potential.coefficients()
     if sc.model.topology == "fixed":
@@ -261,7 +324,7 @@ def test_m2_matches_reference_step_by_step(taichi_cpu, case):
         worst = max(worst, np.abs(kx - x).max(), np.abs(kv - v).max())
         assert worst < TOL, f"step {step}: engine and reference differ by {worst:.3g}"
     assert np.abs(v).max() > 1e-3  # the run did something
-    if case.get("search") in ("grid", "hash"):
+    if case.get("search") in ("grid", "hash") and path == "per_step":
         assert k.grid.layout == {"grid": "dense", "hash": "hash"}[case["search"]]
 
 
@@ -280,10 +343,11 @@ M3_CASES = [
 
 
 @pytest.mark.parametrize("case", M3_CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
-def test_m3_matches_reference_step_by_step(taichi_cpu, case):
+def test_m3_matches_reference_step_by_step(path, case):
     sc = m3_scenario(**dict(case))
     p = sc.model
-    k = make_kernel(sc, hashed=case.get("neighbour_search") == "hash")
+    fused_or_skip(path, sc, case.get("neighbour_search") == "hash")
+    k = make_kernel(sc, hashed=case.get("neighbour_search") == "hash", path=path)
     ref = M3Ref(p, sc.neighbours.radius, sc.inclusive)
     x, v = state(k)
     R = np.full(sc.n_agents, sc.neighbours.radius)
@@ -306,28 +370,29 @@ def test_m3_matches_reference_step_by_step(taichi_cpu, case):
         np.testing.assert_array_equal(kR, R, err_msg=f"radii differ at step {step}")
     counts = k.extra()["adaptive_radius"]
     assert (counts["halvings"], counts["increases"]) == (halved, grown)
-    if case.get("neighbour_search") in ("grid", "hash"):
+    if case.get("neighbour_search") in ("grid", "hash") and path == "per_step":
         assert k.grid.layout == {"grid": "dense", "hash": "hash"}[case["neighbour_search"]]
     if p.adaptive_radius:
         assert halved > 0 and grown > 0  # both branches of eq. 4 were exercised
 
 
-def test_sprawling_swarm_falls_back_to_the_hashed_grid(taichi_cpu):
-    """A box needing more than 4 cells per agent is bucketed by the engine's hashed grid;
-    the trajectory still matches the reference."""
+def test_sprawling_swarm_falls_back_to_the_hashed_grid(path):
+    """A box needing more than 4 cells per agent is bucketed by the engine's hashed grid
+    (the fused path: hashed buckets of its cells); the trajectory still matches the
+    reference."""
     init = lattice(70, 1.1, 3)
     init["positions"][60:] = [[1000.0 + 1.1 * i, -500.0] for i in range(10)]
     sc = Scenario.model_validate({
         "model": {"kind": "flocking"}, "space": {"kind": "plane"},
         "neighbours": {"radius": 2.0}, "initial": init, "time": {"steps": 50, "dt": 0.01},
     })
-    k = make_kernel(sc)
+    k = make_kernel(sc, path=path)
     x, v = state(k)
     for step in range(sc.time.steps):
         k.step(step)
         x, v = euler(x, v, m2_accel(x, v, a=1.0, R=2.0), sc.time.dt)
     kx, kv = state(k)
-    assert k.grid.layout == "hash"
+    assert path == "fused" or k.grid.layout == "hash"
     assert max(np.abs(kx - x).max(), np.abs(kv - v).max()) < TOL
 
 

@@ -15,13 +15,17 @@ from scipy.sparse.csgraph import connected_components
 
 import kernels
 from schemas import PRESETS, Scenario
+from tests import test_flocking_reference as reference
 from tests.test_flocking_reference import (
+    fused_or_skip,
     lattice,
     m3_scenario,
     make_kernel,
     navigation_ref,
     pair_geometry,
 )
+
+path = reference.path  # the fixture: both engine paths
 
 
 def nav_at(k, points: np.ndarray) -> np.ndarray:
@@ -93,13 +97,14 @@ def test_obstacle_grid_matches_brute_force(taichi_cpu):
     assert near.sum() > 200
 
 
-def test_obstacle_preset_reaches_the_destination(taichi_cpu):
+def test_obstacle_preset_reaches_the_destination(path):
     """Paper 002, section V: every vehicle ends inside the V_min level set around (0, 0),
     with no vehicle-vehicle or vehicle-obstacle collision on the way."""
     spec = PRESETS["tanner-obstacles"].build()
     spec["recording"] = {**spec["recording"], "observables_every": 25}
     result = kernels.run(Scenario.model_validate(spec))
     assert result.status == "completed", result.error
+    assert result.extra["engine_path"] == path
     obs = result.observables
     assert obs["time"][-1] == pytest.approx(300.0)
     assert obs["inside_vmin_fraction"][-1] == 1.0
@@ -111,7 +116,7 @@ def test_obstacle_preset_reaches_the_destination(taichi_cpu):
     json.dumps(result.summary(), allow_nan=False)
 
 
-def test_stuck_pair_halves_then_recovers_its_radius(taichi_cpu):
+def test_stuck_pair_halves_then_recovers_its_radius(path):
     """A constructed stuck case for eq. 4. Agent 0 sits at the destination, agent 1 at rest
     where the mission pull balances the pair repulsion (2 s / (1 + s^2)^2 = 2/s^3 - 2/s,
     s = 0.8955). Agent 0 is pushed off the destination, the pair drifts, and whichever
@@ -128,7 +133,7 @@ def test_stuck_pair_halves_then_recovers_its_radius(taichi_cpu):
                     "velocities": [[0, 0], [0, 0]]},
         "time": {"steps": 1000, "dt": dt},
     })
-    k = make_kernel(sc)
+    k = make_kernel(sc, path=path)
     history = []  # (time, R_0, R_1, speeds, V) at every evaluation of eq. 4
     for step in range(sc.time.steps):
         if step > 0 and step % every == 0:
@@ -153,9 +158,10 @@ def test_stuck_pair_halves_then_recovers_its_radius(taichi_cpu):
 
 
 @pytest.mark.parametrize("rule", ["own", "min"])
-def test_m3_observables_match_brute_force(taichi_cpu, rule):
+def test_m3_observables_match_brute_force(path, rule):
     sc = m3_scenario(n=14, steps=60, radius_rule=rule, neighbour_search="grid")
-    k = make_kernel(sc)
+    fused_or_skip(path, sc)
+    k = make_kernel(sc, path=path)
     for step in range(sc.time.steps):
         k.step(step)
     obs = k.observe(sc.time.steps)

@@ -1,0 +1,85 @@
+"""Small-N benchmark of the flocking family (M2, M3): fused path against per-step path.
+
+    python -m bench.small_n_flocking            # per-step cost at N = 5, 20, 100, 1000
+                                                # and the 10^4-step presets, both paths
+    python -m bench.small_n_flocking --sizes    # the per-N table only
+
+One JSON line per measurement: wall and CPU time (`time.process_time`) per step, and the
+load average beside them (the machine is shared). Scenarios are preset-like: tjp-switching
+(and tjp-fixed) with the initial box grown with N at the preset's density, observables
+every 10 steps, no frames, one thread; compile and kernel loading excluded by a warm-up run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import math
+import os
+import time
+
+from schemas import PRESETS, Scenario
+
+SIZES = [5, 20, 100, 1000]
+
+
+def preset_like(name: str, n: int, steps: int) -> Scenario:
+    """The preset at N agents, the initial box scaled to keep the preset's density."""
+    spec = copy.deepcopy(PRESETS[name].build())  # build() shares its nested dicts
+    spec["time"]["steps"] = steps
+    spec["recording"] = {"every": 0, "observables_every": 10}
+    spec["threads"] = 1
+    init = spec["initial"]
+    if n != init["N"]:
+        half = 2.5 * math.sqrt(n / init["N"])
+        init["N"] = n
+        init["region"] = {"kind": "box", "low": [-half, -half], "high": [half, half]}
+    return Scenario.model_validate(spec)
+
+
+def timed(sc: Scenario, fused: bool) -> dict:
+    import kernels
+    from kernels import engine
+
+    engine.FUSED_MAX_N = 20_000 if fused else 0
+    kernels.run(Scenario.model_validate({**sc.model_dump(mode="json"),
+                                         "time": {"steps": 2, "dt": sc.time.dt}}))
+    w0, c0 = time.perf_counter(), time.process_time()
+    res = kernels.run(sc)
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    assert res.extra["engine_path"] == ("fused" if fused else "per_step")
+    return {"path": res.extra["engine_path"], "status": res.status, "steps": res.steps,
+            "wall_s": round(wall, 4), "cpu_s": round(cpu, 4),
+            "us_per_step_wall": round(1e6 * wall / sc.time.steps, 1),
+            "us_per_step_cpu": round(1e6 * cpu / sc.time.steps, 1),
+            "loadavg_1min": os.getloadavg()[0]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", action="store_true", help="the per-N table only")
+    args = ap.parse_args()
+    from kernels import runtime
+
+    runtime.ensure("cpu", 1)
+    for n in SIZES:
+        for name in ("tjp-switching", "tjp-fixed"):
+            for fused in (True, False):
+                steps = (3000 if n <= 100 else 1000) if fused else 300
+                row = timed(preset_like(name, n, steps), fused)
+                print(json.dumps({"scenario": name, "N": n, **row}), flush=True)
+    if args.sizes:
+        return
+    for name in ("tjp-switching", "tjp-fixed", "tanner-obstacles"):
+        spec = PRESETS[name].build()
+        spec["recording"]["every"] = 0  # no trajectory file here
+        spec["threads"] = 1
+        sc = Scenario.model_validate(spec)
+        for fused in (True, False):
+            print(json.dumps({"scenario": name, "preset": True, "N": sc.n_agents,
+                              **timed(sc, fused)}), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1097 @@
+"""M2 and M3 on the small-N path: many steps of many replicas in one kernel launch.
+
+The equations are the ones `kernels/flocking.py` and `kernels/obstacles.py` document
+(paper 000 eq. 1, 3-5, 10; paper 002 eq. 3-5 and p. 3); only the schedule differs, as in
+`kernels/vicsek_fused.py`: one launch advances every replica of a batch through a window
+of steps, replicas in parallel (one per CPU task), each replica's steps and agents serial
+inside, the state kept in the kernel's arrays and the observables written into a
+per-replica buffer. A replica computes the same numbers alone, in a batch, or cut into
+any windows.
+
+Per replica and step s (state X(s) = (r, v[, R_i]) in agent-id order), semi-implicit
+Euler:
+  1. switching/M3: a cell list of r(s) over its bounding box (cells of side R, the initial
+     radius, which bounds every R_i; a stable counting sort, so every sum has one fixed
+     order; hashed buckets of the same cells when the box needs over 4 N + 16 of them), or
+     all pairs when `neighbour_search` says so ("auto": N <= 64) or the box is under three
+     cells across; the slot-order copy of X(s) is what every visit reads;
+  2. on an observation step, the observables of X(s) (one more visit: valencies, the
+     union-find of the graph, the saturated potential, the closest pair);
+  3. M3 at s > 0, s % radius_every == 0: the adaptive radius of eq. 4, synchronously;
+  4. u_i of eq. 3 (and paper 002's -grad V_i - c_d v_i), v' = v + dt u, r' = r + dt v'.
+     A non-finite value stops the replica and records the step.
+The mission potential folds the obstacles of the 3x3 cells of a per-replica obstacle grid
+(cells of side obstacle_range + the largest disc radius, as kernels/flocking_navigation.py).
+
+lambda_2 (switching, N <= lambda2_max_agents) needs an eigensolver: the kernel writes
+(r, R_i) at each observation step into a snapshot buffer and the host computes lambda_2
+from it after each launch, with the per-step path's own functions (a stacked dense
+eigvalsh at N <= 32). A window holding more observations than the buffer is cut into
+several launches, which never changes a bit.
+
+Not on this path (`FlockingBatch.batch_key` returns None; the per-step path runs them):
+the `rk4` integrator, and M3's `radius_rule: "min"`.
+"""
+
+from functools import cache
+from typing import Any
+
+import numpy as np
+import taichi as ti
+
+from schemas import Scenario
+
+from . import flocking_observe as fo
+from . import potentials
+from .topology import build_edges, to_csr
+
+nd = ti.types.ndarray()
+SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
+_WIDEN = 1.0 + 1e-9  # cells a hair wider than R: rounding can never hide a neighbour
+MAX_CELLS_ACROSS = 2.0**30  # as kernels/grid.py: beyond it the swarm has run away
+FAR = 1e300  # "no obstacle within reach", as kernels/flocking_navigation.py
+NEAREST_NONE = 1e300
+TWO_PI = 2 * np.pi
+HIST = fo.HIST_BINS + 1  # valency histogram columns (the last one: 16 and more)
+SNAP_DOUBLES = 4_000_000  # snapshot buffer for lambda_2 (32 MB), cut into launches above
+MODES = {"fixed": 0, "switching": 1, "mission": 2}
+
+# Per-replica parameter slots: prm (f64) and iprm (i32).
+(DT, A, C, R, R2, CD, VMIN, STUCK2, FLOOR, DX, DY, RANGE, LAMBDA, KAPPA, OBX0, OBY0, OBX1,
+ OBY1, OX, OY, OW, OCAP, QC, SPAN) = range(24)
+N_PRM = 24
+(STEPS, EVERY, NOBS, BAD, CAUSE, CELLS, INCL, REVERY, ADAPT, DAMP, ONX, ONY, OCOFF, OM,
+ VPER, VOFF, HALVED, GROWN, SNAP, SNAP0) = range(20)
+N_IPRM = 20
+DAMPING = {"above_vmin": 1, "below_vmin": 2, "everywhere": 3}  # 0: none (M2)
+# Observable columns (energy: W or Q_reduced; q_constant: Q - Q_reduced).
+OBS = ("step", "mean_velocity_x", "mean_velocity_y", "velocity_disagreement",
+       "velocity_disagreement_max", "speed_min", "speed_mean", "speed_max", "heading_spread",
+       "energy", "q_constant", "components", "valency_mean", "valency_min", "valency_max",
+       "min_distance", "min_pair_i", "min_pair_j", "destination_distance_mean",
+       "destination_distance_max", "inside_vmin_fraction", "mission_potential_max",
+       "obstacle_distance_min", "radius_min", "radius_mean", "radius_max",
+       "velocity_disagreement_components", "velocity_disagreement_components_max")
+COL = {name: k for k, name in enumerate(OBS)}
+N_OBS = len(OBS)
+VELOCITY_KEYS = OBS[1:9]
+MISSION_KEYS = OBS[18:]
+Grid = ti.types.vector(6, ti.f64)  # (cells across, cells down, width, x0, y0, extent)
+Acc5 = ti.types.vector(5, ti.f64)
+
+
+@ti.func
+def _find(parent: ti.template(), x):
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]  # path halving
+        x = parent[x]
+    return x
+
+
+@ti.func
+def _union(parent: ti.template(), u, v):
+    ru = _find(parent, u)
+    rv = _find(parent, v)
+    if ru != rv:
+        parent[ti.max(ru, rv)] = ti.min(ru, rv)
+
+
+@ti.func
+def _within(s2, r2, incl):
+    """|d|^2 <= r^2 (incl) or < r^2, as an i32."""
+    return ti.select(incl != 0, ti.cast(s2 <= r2, ti.i32), ti.cast(s2 < r2, ti.i32))
+
+
+@ti.func
+def _nonfinite(x, v):
+    s = x[0] + x[1] + v[0] + v[1]  # NaN if any term is NaN or infinite
+    return ti.cast(ti.math.isnan(s) or ti.math.isinf(s), ti.i32)
+
+
+@ti.func
+def _bucket(cx, cy, nb):
+    """The hashed bucket of cell (cx, cy) among nb (as kernels/grid.py's plane buckets)."""
+    h = (ti.cast(cx, ti.u32) * ti.u32(73856093)) ^ (ti.cast(cy, ti.u32) * ti.u32(19349663))
+    h ^= h >> ti.u32(13)
+    return ti.cast(h % ti.cast(nb, ti.u32), ti.i32)
+
+
+@ti.func
+def build_cells(a0, n, c0, cap, w0, src: ti.template(), may_hash: ti.template(),
+                cell: ti.template(), cstart: ti.template(), cidx: ti.template()):
+    """Cell list of the replica's agents at src (id order, rows a0 .. a0 + n): cidx[a0 + k]
+    is the agent in slot k, slots in cell order and, within a cell, in id order (a stable
+    counting sort); cell c holds slots cstart[c0 + c] .. cstart[c0 + c + 1]. Cells of side
+    w0 numbered row by row over the bounding box while that fits the replica's budget of
+    `cap` cells; a sprawling swarm (a pair blown apart by the 1/s^2 repulsion, say) gets
+    `cap` hashed buckets of the same cells (may_hash), or cells widened until they fit.
+    Returns Grid: cells across = 0: under three cells each way (visit all pairs), -1: the
+    swarm ran away (or NaN); hashed: (cap, -1)."""
+    lo = ti.math.vec2(ti.math.inf)
+    hi = ti.math.vec2(-ti.math.inf)
+    for i in range(a0, a0 + n):
+        p = ti.math.vec2(src[i, 0], src[i, 1])
+        lo = ti.min(lo, p)
+        hi = ti.max(hi, p)
+    ext = hi - lo
+    w = w0
+    nx = 0
+    ny = 0
+    hashed = 0
+    span = ti.max(ext[0], ext[1])
+    if not (span < MAX_CELLS_ACROSS * w):  # NaN included
+        nx = -1
+    if nx == 0:
+        if (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
+            if ti.static(may_hash):
+                hashed = 1
+            else:
+                while (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
+                    w *= 2.0
+        if hashed:
+            nx = cap
+            ny = -1
+        else:
+            nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
+            ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
+            if nx < 3 and ny < 3:
+                nx = 0
+    if nx > 0:
+        nb = nx * ny
+        if hashed:
+            nb = cap
+        for c in range(c0, c0 + nb + 1):
+            cstart[c] = 0
+        for i in range(a0, a0 + n):
+            cx = ti.cast(ti.floor((src[i, 0] - lo[0]) / w), ti.i32)
+            cy = ti.cast(ti.floor((src[i, 1] - lo[1]) / w), ti.i32)
+            cc = 0
+            if hashed:
+                cc = _bucket(cx, cy, nb)
+            else:
+                cc = ti.max(ti.min(cx, nx - 1), 0) + nx * ti.max(ti.min(cy, ny - 1), 0)
+            cell[i] = cc
+            cstart[c0 + cc + 1] += 1
+        for c in range(c0 + 1, c0 + nb + 1):
+            cstart[c] += cstart[c - 1]
+        for i in range(a0, a0 + n):  # cstart[c] as the fill pointer of cell c
+            slot = c0 + cell[i]
+            k = cstart[slot]
+            cidx[a0 + k] = i
+            cstart[slot] = k + 1
+        for m in range(nb):  # shift back: start[c] = end[c - 1], from the top
+            c = c0 + nb - m
+            cstart[c] = cstart[c - 1]
+        cstart[c0] = 0
+    elif nx == 0:
+        for k in range(n):
+            cidx[a0 + k] = a0 + k
+    return Grid(nx, ny, w, lo[0], lo[1], span)
+
+
+def make_visit(pair):
+    """visit(k, ...) folding acc = pair(k, m, d, acc, q, ps, S) over slot k's candidates,
+    d = r_m - r_k: every slot of the replica (cells across = 0), the 3x3 cells around
+    slot k read as three contiguous rows of slots, or (hashed, ny < 0) the buckets of the
+    3x3 cells, each slot checked against its exact cell (ps columns 5, 6)."""
+
+    @ti.func
+    def visit(k, a0, n, c0, nx, ny, acc, q, ps: ti.template(), cell: ti.template(),
+              cstart: ti.template(), cidx: ti.template(), S: ti.template()):
+        xk = ti.math.vec2(ps[k, 0], ps[k, 1])
+        if nx == 0:
+            for m in range(a0, a0 + n):
+                d = ti.math.vec2(ps[m, 0] - xk[0], ps[m, 1] - xk[1])
+                acc = pair(k, m, d, acc, q, ps, S)
+        elif ny < 0:
+            cx = ps[k, 5]
+            cy = ps[k, 6]
+            for t in range(9):  # a runtime loop, not unrolled: less to compile
+                dx = t % 3 - 1
+                dy = t // 3 - 1
+                bk = c0 + _bucket(ti.cast(cx, ti.i32) + dx, ti.cast(cy, ti.i32) + dy, nx)
+                for m in range(a0 + cstart[bk], a0 + cstart[bk + 1]):
+                    if ps[m, 5] == cx + dx and ps[m, 6] == cy + dy:
+                        d = ti.math.vec2(ps[m, 0] - xk[0], ps[m, 1] - xk[1])
+                        acc = pair(k, m, d, acc, q, ps, S)
+        else:
+            cc = cell[cidx[k]]
+            cx = cc % nx
+            cy = cc // nx
+            xlo = ti.max(cx - 1, 0)
+            xhi = ti.min(cx + 1, nx - 1)
+            for dy in range(-1, 2):
+                row = cy + dy
+                if row >= 0 and row < ny:
+                    base = c0 + row * nx
+                    for m in range(a0 + cstart[base + xlo], a0 + cstart[base + xhi + 1]):
+                        d = ti.math.vec2(ps[m, 0] - xk[0], ps[m, 1] - xk[1])
+                        acc = pair(k, m, d, acc, q, ps, S)
+        return acc
+
+    return visit
+
+
+@ti.func
+def navigation(b, x, prm: ti.template(), iprm: ti.template(), opos: ti.template(),
+               orad: ti.template(), ostart: ti.template()):
+    """(V_i, dV/dx, dV/dy, min boundary distance) at x for replica b: paper 002's
+    navigation function (see kernels/flocking_navigation.py), the obstacles folded by the
+    product rule over the 3x3 cells of the replica's obstacle grid."""
+    acc = ti.math.vec4(1.0, 0.0, 0.0, FAR)
+    if iprm[b, OM] > 0:
+        inside = (prm[b, OBX0] <= x[0]) & (x[0] <= prm[b, OBX1]) & (prm[b, OBY0] <= x[1]) \
+            & (x[1] <= prm[b, OBY1])
+        if inside:
+            w = prm[b, OW]
+            nx = iprm[b, ONX]
+            ny = iprm[b, ONY]
+            c0 = iprm[b, OCOFF]
+            cx = ti.cast(ti.floor((x[0] - prm[b, OX]) / w), ti.i32)
+            cy = ti.cast(ti.floor((x[1] - prm[b, OY]) / w), ti.i32)
+            xlo = ti.max(cx - 1, 0)
+            xhi = ti.min(cx + 1, nx - 1)
+            rng = prm[b, RANGE]
+            lam = prm[b, LAMBDA]
+            for dy in range(-1, 2):
+                row = cy + dy
+                if row >= 0 and row < ny and xlo <= xhi:
+                    base = c0 + row * nx
+                    for o in range(ostart[base + xlo], ostart[base + xhi + 1]):
+                        d = ti.math.vec2(opos[o, 0] - x[0], opos[o, 1] - x[1])
+                        dist = ti.sqrt(d.dot(d))
+                        delta = dist - orad[o]
+                        acc[3] = ti.min(acc[3], delta)
+                        if delta * delta < rng * rng:  # m = 1; otherwise beta = 1
+                            e = delta - rng
+                            qq = e * e + 1.0
+                            beta = 1.0 - lam * e * e / qq
+                            dbeta = -2.0 * lam * e / (qq * qq)
+                            g = (-dbeta / dist) * d
+                            bb = acc[0]
+                            acc[1] = acc[1] * beta + bb * g[0]
+                            acc[2] = acc[2] * beta + bb * g[1]
+                            acc[0] = bb * beta
+    bsum = acc[0]
+    gb = ti.math.vec2(acc[1], acc[2])
+    y = ti.math.vec2(x[0] - prm[b, DX], x[1] - prm[b, DY])
+    a = y.dot(y)
+    v = 0.0
+    g = ti.math.vec2(0.0)
+    kappa = prm[b, KAPPA]
+    if kappa == 1.0:
+        dd = a + bsum
+        v = a / dd
+        g = (2.0 * bsum * y - a * gb) / (dd * dd)
+    else:
+        dd = ti.pow(a, kappa) + bsum
+        dk = ti.pow(dd, -1.0 / kappa)
+        v = a * dk
+        gd = 2.0 * kappa * ti.pow(a, kappa - 1.0) * y + gb
+        g = dk * 2.0 * y - (a / kappa) * (dk / dd) * gd
+    return ti.math.vec4(v, g[0], g[1], acc[3])
+
+
+@ti.func
+def heading_spread(a0, n, ps: ti.template(), lo: ti.template(), hi: ti.template()):
+    """The shortest arc holding every heading atan2(v): 2 pi less the largest gap, by
+    n buckets over [0, 2 pi) (the largest gap spans a bucket boundary: exact)."""
+    res = 0.0
+    if n >= 2:
+        for k in range(a0, a0 + n):
+            lo[k] = ti.math.inf
+            hi[k] = -ti.math.inf
+        for k in range(a0, a0 + n):
+            th = ti.atan2(ps[k, 3], ps[k, 2])
+            a = th - TWO_PI * ti.floor(th / TWO_PI)
+            if a >= TWO_PI:
+                a -= TWO_PI
+            j = a0 + ti.min(ti.cast(a / TWO_PI * n, ti.i32), n - 1)
+            lo[j] = ti.min(lo[j], a)
+            hi[j] = ti.max(hi[j], a)
+        first = ti.math.inf
+        last = -ti.math.inf
+        gap = 0.0
+        for j in range(a0, a0 + n):
+            if lo[j] <= hi[j]:
+                if last > -ti.math.inf:
+                    gap = ti.max(gap, lo[j] - last)
+                else:
+                    first = lo[j]
+                last = hi[j]
+        res = TWO_PI - ti.max(gap, first + TWO_PI - last)
+    return res
+
+
+@ti.func
+def velocity_stats(row, a0, n, ps: ti.template(), lo: ti.template(), hi: ti.template(),
+                   obs: ti.template()):
+    """The columns of VELOCITY_KEYS for the state in ps (velocity in columns 2, 3);
+    returns the kinetic energy 1/2 sum |v|^2."""
+    m = ti.math.vec2(0.0)
+    for k in range(a0, a0 + n):
+        m += ti.math.vec2(ps[k, 2], ps[k, 3])
+    m /= n
+    dev = 0.0
+    dmax = 0.0
+    smin = ti.math.inf
+    smax = 0.0
+    ssum = 0.0
+    kin = 0.0
+    for k in range(a0, a0 + n):
+        v = ti.math.vec2(ps[k, 2], ps[k, 3])
+        e = v - m
+        d2 = e.dot(e)
+        dev += d2
+        dmax = ti.max(dmax, d2)
+        v2 = v.dot(v)
+        kin += v2
+        sp = ti.sqrt(v2)
+        smin = ti.min(smin, sp)
+        smax = ti.max(smax, sp)
+        ssum += sp
+    obs[row, 1] = m[0]
+    obs[row, 2] = m[1]
+    obs[row, 3] = dev
+    obs[row, 4] = ti.sqrt(dmax)
+    obs[row, 5] = smin
+    obs[row, 6] = ssum / n
+    obs[row, 7] = smax
+    obs[row, 8] = heading_spread(a0, n, ps, lo, hi)
+    return 0.5 * kin
+
+
+@cache
+def advance_kernel(mode: int):
+    """The window kernel for one mode: fixed graph, switching (M2) or mission (M3)."""
+    fixed = mode == MODES["fixed"]
+    mission = mode == MODES["mission"]
+
+    @ti.func
+    def pair_radius2(k, q, ps: ti.template()):
+        r2 = q[0]
+        if ti.static(mission):  # paper 002 eq. 4 as printed: R_ij = R_i ("own")
+            r2 = ps[k, 4] * ps[k, 4]
+        return r2
+
+    @ti.func
+    def force_pair(k, m, d, acc, q, ps: ti.template(), S: ti.template()):
+        # Branch-free, as kernels/flocking_forces.py: acc = (sum_{N_i} v_j + sum_{s < R}
+        # f d, |N_i|); the select drops f(0) = inf for k itself (a coincident pair keeps it).
+        s2 = d.dot(d)
+        r2 = pair_radius2(k, q, ps)
+        other = ti.cast(m != k, ti.i32)
+        w = ti.cast(_within(s2, r2, ti.cast(q[1], ti.i32)) & other, ti.f64)
+        f = ti.select((ti.cast(s2 < r2, ti.i32) & other) != 0,
+                      potentials.force_factor(s2, q[2]), 0.0)
+        return acc + ti.math.vec3(w * ps[m, 2] + f * d[0], w * ps[m, 3] + f * d[1], w)
+
+    @ti.func
+    def radius_pair(k, m, d, acc, q, ps: ti.template(), S: ti.template()):
+        if m != k and _within(d.dot(d), pair_radius2(k, q, ps), ti.cast(q[1], ti.i32)):
+            acc = ti.max(acc, ps[m, 4])
+        return acc
+
+    @ti.func
+    def observe_pair(k, m, d, acc, q, ps: ti.template(), S: ti.template()):
+        """acc = (valency, nearest d^2, nearest slot, sum V below R, pairs below R)."""
+        parent = ti.static(S[0])
+        if m != k:
+            s2 = d.dot(d)
+            if s2 < acc[1]:
+                acc[1] = s2
+                acc[2] = ti.cast(m, ti.f64)
+            r2 = pair_radius2(k, q, ps)
+            if _within(s2, r2, ti.cast(q[1], ti.i32)):
+                acc[0] += 1.0
+                # own: j in N_i need not imply i in N_j, so every edge is joined from i.
+                if ti.static(mission) or m > k:
+                    _union(parent, k, m)
+            if s2 < r2:
+                acc[3] += potentials.value(s2, q[2], q[3])
+                acc[4] += 1.0
+        return acc
+
+    visit_force = make_visit(force_pair)
+    visit_radius = make_visit(radius_pair)
+    visit_observe = make_visit(observe_pair)
+
+    @ti.func
+    def closest_all_pairs(a0, n, ps: ti.template()):
+        """(d^2, slot, slot) of the closest pair, every pair tested."""
+        best = ti.math.vec3(NEAREST_NONE, a0, a0)
+        for k in range(a0, a0 + n):
+            for m in range(k + 1, a0 + n):
+                d = ti.math.vec2(ps[m, 0] - ps[k, 0], ps[m, 1] - ps[k, 1])
+                s2 = d.dot(d)
+                if s2 < best[0]:
+                    best = ti.math.vec3(s2, k, m)
+        return best
+
+    @ti.func
+    def closest_cells(a0, n, c0, cap, ps: ti.template(), cell: ti.template(),
+                      cstart: ti.template(), cidx: ti.template()):
+        """(d^2, id row, id row) of the closest pair of ps (id order): a cell list of
+        side about the mean spacing, doubled until the pair found lies closer than a cell
+        side (then no closer pair can sit outside the 3x3 cells)."""
+        lo = ti.math.vec2(ti.math.inf)
+        hi = ti.math.vec2(-ti.math.inf)
+        for i in range(a0, a0 + n):
+            lo = ti.min(lo, ti.math.vec2(ps[i, 0], ps[i, 1]))
+            hi = ti.max(hi, ti.math.vec2(ps[i, 0], ps[i, 1]))
+        w = ti.max(hi[0] - lo[0], hi[1] - lo[1]) / ti.sqrt(ti.cast(n, ti.f64))
+        if not (w > 0.0):
+            w = 1.0
+        best = ti.math.vec3(NEAREST_NONE, a0, a0)
+        done = False
+        while not done:
+            g = build_cells(a0, n, c0, cap, w, ps, False, cell, cstart, cidx)
+            nx = ti.cast(g[0], ti.i32)
+            ny = ti.cast(g[1], ti.i32)
+            best = ti.math.vec3(NEAREST_NONE, a0, a0)
+            if nx <= 0:
+                best = closest_all_pairs(a0, n, ps)
+                done = True
+            else:
+                for k in range(a0, a0 + n):
+                    i = cidx[k]
+                    cc = cell[i]
+                    cx = cc % nx
+                    cy = cc // nx
+                    xlo = ti.max(cx - 1, 0)
+                    xhi = ti.min(cx + 1, nx - 1)
+                    for dy in range(-1, 2):
+                        row = cy + dy
+                        if row >= 0 and row < ny:
+                            base = c0 + row * nx
+                            for m in range(a0 + cstart[base + xlo], a0 + cstart[base + xhi + 1]):
+                                j = cidx[m]
+                                if j != i:
+                                    d = ti.math.vec2(ps[j, 0] - ps[i, 0], ps[j, 1] - ps[i, 1])
+                                    s2 = d.dot(d)
+                                    if s2 < best[0]:
+                                        best = ti.math.vec3(s2, i, j)
+                w = g[2]
+                if best[0] < w * w:
+                    done = True
+                else:
+                    w *= 2.0
+        return best
+
+    @ti.func
+    def write_closest(row, a0, best, ids_of_slots: ti.template(), cidx: ti.template(),
+                      obs: ti.template()):
+        i = ti.cast(best[1], ti.i32)
+        j = ti.cast(best[2], ti.i32)
+        if ti.static(ids_of_slots):
+            i = cidx[i]
+            j = cidx[j]
+        obs[row, COL["min_distance"]] = ti.sqrt(best[0])
+        obs[row, COL["min_pair_i"]] = ti.min(i, j) - a0
+        obs[row, COL["min_pair_j"]] = ti.max(i, j) - a0
+
+    @ti.func
+    def observe_fixed(b, a0, n, c0, cap, row, prm: ti.template(), ps: ti.template(),
+                      ptr: ti.template(), idx: ti.template(), cell: ti.template(),
+                      cstart: ti.template(), cidx: ti.template(), lo: ti.template(),
+                      hi: ti.template(), obs: ti.template()):
+        """W of eq. 5 and the closest pair (the graph's own observables are constants)."""
+        kin = velocity_stats(row, a0, n, ps, lo, hi, obs)
+        pot = 0.0
+        for i in range(a0, a0 + n):
+            for e in range(ptr[i], ptr[i + 1]):
+                j = idx[e]
+                d = ti.math.vec2(ps[j, 0] - ps[i, 0], ps[j, 1] - ps[i, 1])
+                pot += potentials.value(d.dot(d), prm[b, A], prm[b, C])
+        obs[row, COL["energy"]] = 0.5 * pot + kin
+        best = closest_cells(a0, n, c0, cap, ps, cell, cstart, cidx)
+        write_closest(row, a0, best, False, cidx, obs)
+
+    @ti.func
+    def observe_metric(b, a0, n, c0, nx, ny, w, row, nrow, q, prm: ti.template(),
+                       iprm: ti.template(), ps: ti.template(), cell: ti.template(),
+                       cstart: ti.template(), cidx: ti.template(), parent: ti.template(),
+                       csum: ti.template(), lo: ti.template(), hi: ti.template(),
+                       mis: ti.template(), obs: ti.template(), val: ti.template(),
+                       snap: ti.template(), sbase: ti.template()):
+        """The switching observables of X(s) (ps in slot order) into obs[row], the
+        valencies of observation `nrow` into val, and (for lambda_2) the snapshot of
+        (r, R_i) in id order."""
+        kin = velocity_stats(row, a0, n, ps, lo, hi, obs)
+        for k in range(a0, a0 + n):
+            parent[k] = k
+        vper = iprm[b, VPER]
+        vbase = iprm[b, VOFF] + nrow * ti.select(vper != 0, n, HIST)
+        dsum = 0.0
+        dmin = 2.0**30
+        dmax = 0.0
+        pot = 0.0
+        best = ti.math.vec3(NEAREST_NONE, a0, a0)
+        for k in range(a0, a0 + n):
+            acc = Acc5(0.0, NEAREST_NONE, ti.cast(k, ti.f64), 0.0, 0.0)
+            acc = visit_observe(k, a0, n, c0, nx, ny, acc, q, ps, cell, cstart, cidx,
+                                ti.static((parent,)))
+            deg = acc[0]
+            dsum += deg
+            dmin = ti.min(dmin, deg)
+            dmax = ti.max(dmax, deg)
+            # V(R_i) once per agent: R_i is R (M2) or agent i's own radius (M3).
+            pot += acc[3] - acc[4] * potentials.value(pair_radius2(k, q, ps), q[2], q[3])
+            if acc[1] < best[0]:
+                best = ti.math.vec3(acc[1], k, acc[2])
+            ideg = ti.cast(deg, ti.i32)
+            if vper != 0:
+                val[vbase + cidx[k] - a0] = ideg
+            else:
+                val[vbase + ti.min(ideg, HIST - 1)] += 1
+        obs[row, COL["valency_mean"]] = dsum / n
+        obs[row, COL["valency_min"]] = dmin
+        obs[row, COL["valency_max"]] = dmax
+        if not (nx == 0 or best[0] < w * w):  # nothing within a cell: look everywhere
+            best = closest_all_pairs(a0, n, ps)
+        write_closest(row, a0, best, True, cidx, obs)
+        roots = 0
+        for k in range(a0, a0 + n):
+            if parent[k] == k:
+                roots += 1
+        obs[row, COL["components"]] = roots
+        energy = 0.5 * pot + kin
+        if ti.static(mission):
+            msum = 0.0
+            inside = 0
+            mmax = -ti.math.inf
+            omin = prm[b, OCAP]  # exact below the obstacle grid's cell; capped there
+            dmean = 0.0
+            dfar = 0.0
+            rmin = ti.math.inf
+            rmax = 0.0
+            rsum = 0.0
+            qc = 0.0
+            for k in range(a0, a0 + n):
+                x = ti.math.vec2(ps[k, 0], ps[k, 1])
+                nv = ti.math.vec4(mis[k, 0], mis[k, 1], mis[k, 2], mis[k, 3])
+                msum += nv[0]
+                if nv[0] <= prm[b, VMIN]:
+                    inside += 1
+                mmax = ti.max(mmax, nv[0])
+                omin = ti.min(omin, nv[3])
+                dd = ti.sqrt((x[0] - prm[b, DX]) ** 2 + (x[1] - prm[b, DY]) ** 2)
+                dmean += dd
+                dfar = ti.max(dfar, dd)
+                r = ps[k, 4]
+                rmin = ti.min(rmin, r)
+                rmax = ti.max(rmax, r)
+                rsum += r
+                qc += potentials.value(r * r, q[2], q[3])
+                csum[k, 0] = 0.0
+                csum[k, 1] = 0.0
+                csum[k, 2] = 0.0
+            energy += msum  # eq. 5: + sum_i V_i
+            obs[row, COL["q_constant"]] = 0.5 * (n - 1) * qc
+            obs[row, COL["destination_distance_mean"]] = dmean / n
+            obs[row, COL["destination_distance_max"]] = dfar
+            obs[row, COL["inside_vmin_fraction"]] = ti.cast(inside, ti.f64) / n
+            obs[row, COL["mission_potential_max"]] = mmax
+            obs[row, COL["obstacle_distance_min"]] = omin
+            obs[row, COL["radius_min"]] = rmin
+            obs[row, COL["radius_mean"]] = rsum / n
+            obs[row, COL["radius_max"]] = rmax
+            # Paper 002: each component synchronises on its own.
+            for k in range(a0, a0 + n):
+                root = _find(parent, k)
+                csum[root, 0] += ps[k, 2]
+                csum[root, 1] += ps[k, 3]
+                csum[root, 2] += 1.0
+            dev = 0.0
+            dev_max = 0.0
+            for k in range(a0, a0 + n):
+                root = _find(parent, k)
+                cnt = csum[root, 2]
+                e = ti.math.vec2(ps[k, 2] - csum[root, 0] / cnt, ps[k, 3] - csum[root, 1] / cnt)
+                d2 = e.dot(e)
+                dev += d2
+                dev_max = ti.max(dev_max, d2)
+            obs[row, COL["velocity_disagreement_components"]] = dev
+            obs[row, COL["velocity_disagreement_components_max"]] = ti.sqrt(dev_max)
+        else:
+            obs[row, COL["q_constant"]] = prm[b, QC]
+        obs[row, COL["energy"]] = energy
+        if iprm[b, SNAP] != 0:
+            base = sbase[b] + (nrow - iprm[b, SNAP0]) * n * 3
+            for k in range(a0, a0 + n):
+                at = base + (cidx[k] - a0) * 3
+                snap[at] = ps[k, 0]
+                snap[at + 1] = ps[k, 1]
+                if ti.static(mission):
+                    snap[at + 2] = ps[k, 4]
+
+    @ti.kernel
+    def advance(s0: ti.i32, s1: ti.i32, aoff: nd, coff: nd, ooff: nd, prm: nd, iprm: nd,
+                pos: nd, vel: nd, rad: nd, ps: nd, cell: nd, cstart: nd, cidx: nd,
+                parent: nd, csum: nd, mis: nd, arc_lo: nd, arc_hi: nd, ptr: nd, idx: nd, opos: nd,
+                orad: nd, ostart: nd, obs: nd, val: nd, snap: nd, sbase: nd):
+        for t in range((aoff.shape[0] - 1) * SPREAD):
+            if t % SPREAD == 0:  # one replica per CPU task
+                b = t // SPREAD
+                a0 = aoff[b]
+                n = aoff[b + 1] - a0
+                c0 = coff[b]
+                cap = coff[b + 1] - c0 - 1
+                every = iprm[b, EVERY]
+                dt = prm[b, DT]
+                # (uniform R^2, inclusive, a, c) of the pair terms
+                q = ti.math.vec4(prm[b, R2], iprm[b, INCL], prm[b, A], prm[b, C])
+                iprm[b, SNAP0] = iprm[b, NOBS]
+                s = s0
+                while s < s1 and s <= iprm[b, STEPS] and iprm[b, BAD] < 0:
+                    steps = iprm[b, STEPS]
+                    graph = s % every == 0 or s == steps  # an observation step
+                    nx = 0
+                    ny = 0
+                    w = 0.0
+                    ox = 0.0
+                    oy = 0.0
+                    if ti.static(not fixed):
+                        if iprm[b, CELLS]:
+                            g = build_cells(a0, n, c0, cap, prm[b, R] * _WIDEN, pos, True,
+                                            cell, cstart, cidx)
+                            if g[0] < 0:
+                                iprm[b, BAD] = s
+                                iprm[b, CAUSE] = 1
+                                prm[b, SPAN] = g[5]
+                                break
+                            nx = ti.cast(g[0], ti.i32)
+                            ny = ti.cast(g[1], ti.i32)
+                            w = g[2]
+                            ox = g[3]
+                            oy = g[4]
+                        else:
+                            for k in range(n):
+                                cidx[a0 + k] = a0 + k
+                    else:
+                        for k in range(n):
+                            cidx[a0 + k] = a0 + k
+                    for k in range(a0, a0 + n):  # X(s) in slot order: every visit reads it
+                        i = cidx[k]
+                        ps[k, 0] = pos[i, 0]
+                        ps[k, 1] = pos[i, 1]
+                        ps[k, 2] = vel[i, 0]
+                        ps[k, 3] = vel[i, 1]
+                        if ti.static(mission):
+                            ps[k, 4] = rad[i]
+                        if ny < 0:  # hashed: each slot's exact cell
+                            ps[k, 5] = ti.floor((pos[i, 0] - ox) / w)
+                            ps[k, 6] = ti.floor((pos[i, 1] - oy) / w)
+                    if ti.static(mission):  # V_i at r(s): read by all three passes below
+                        for k in range(a0, a0 + n):
+                            nv = navigation(b, ti.math.vec2(ps[k, 0], ps[k, 1]), prm, iprm,
+                                            opos, orad, ostart)
+                            for c in ti.static(range(4)):
+                                mis[k, c] = nv[c]
+                    if graph:
+                        row = ooff[b] + iprm[b, NOBS]
+                        obs[row, 0] = s
+                        if ti.static(fixed):
+                            observe_fixed(b, a0, n, c0, cap, row, prm, ps, ptr, idx, cell,
+                                          cstart, cidx, arc_lo, arc_hi, obs)
+                        else:
+                            observe_metric(b, a0, n, c0, nx, ny, w, row, iprm[b, NOBS], q, prm,
+                                           iprm, ps, cell, cstart, cidx, parent, csum,
+                                           arc_lo, arc_hi, mis, obs, val,
+                                           snap, sbase)
+                        iprm[b, NOBS] += 1
+                    if s < steps:
+                        if ti.static(mission):
+                            # Eq. 4 at its cadence, before the step's motion, synchronously
+                            # (reads the slot copy, writes rad in id order).
+                            if iprm[b, ADAPT] and s > 0 and s % iprm[b, REVERY] == 0:
+                                halved = 0
+                                grown = 0
+                                for k in range(a0, a0 + n):
+                                    r = ps[k, 4]
+                                    v2 = ps[k, 2] * ps[k, 2] + ps[k, 3] * ps[k, 3]
+                                    new = r
+                                    if v2 < prm[b, STUCK2] and mis[k, 0] > prm[b, VMIN]:
+                                        new = ti.max(0.5 * r, prm[b, FLOOR])
+                                        if new < r:
+                                            halved += 1
+                                    else:
+                                        new = visit_radius(k, a0, n, c0, nx, ny, r, q, ps,
+                                                           cell, cstart, cidx,
+                                                           ti.static((parent,)))
+                                        if new > r:
+                                            grown += 1
+                                    rad[cidx[k]] = new
+                                for k in range(a0, a0 + n):
+                                    ps[k, 4] = rad[cidx[k]]
+                                iprm[b, HALVED] += halved
+                                iprm[b, GROWN] += grown
+                        bad = 0
+                        for k in range(a0, a0 + n):
+                            # X(s + 1) is written in id order as we go: the visits read
+                            # only the slot-order copy, so the update stays synchronous.
+                            # (A fixed graph keeps id order; its observation reuses cidx.)
+                            i = k
+                            if ti.static(not fixed):
+                                i = cidx[k]
+                            xi = ti.math.vec2(ps[k, 0], ps[k, 1])
+                            vi = ti.math.vec2(ps[k, 2], ps[k, 3])
+                            u = ti.math.vec2(0.0)
+                            if ti.static(fixed):
+                                for e in range(ptr[i], ptr[i + 1]):
+                                    j = idx[e]
+                                    d = ti.math.vec2(ps[j, 0] - xi[0], ps[j, 1] - xi[1])
+                                    u += ti.math.vec2(ps[j, 2] - vi[0], ps[j, 3] - vi[1])
+                                    u += potentials.force_factor(d.dot(d), q[2]) * d
+                            else:
+                                acc = visit_force(k, a0, n, c0, nx, ny, ti.math.vec3(0.0), q,
+                                                  ps, cell, cstart, cidx, ti.static((parent,)))
+                                u = ti.math.vec2(acc[0], acc[1]) - acc[2] * vi
+                            if ti.static(mission):
+                                u -= ti.math.vec2(mis[k, 1], mis[k, 2])
+                                damp = iprm[b, DAMP]
+                                vm = mis[k, 0]
+                                if damp == 3 or (damp == 1 and vm > prm[b, VMIN]) or (
+                                        damp == 2 and vm <= prm[b, VMIN]):
+                                    u -= prm[b, CD] * vi
+                            v = vi + dt * u
+                            x = xi + dt * v
+                            pos[i, 0] = x[0]
+                            pos[i, 1] = x[1]
+                            vel[i, 0] = v[0]
+                            vel[i, 1] = v[1]
+                            bad |= _nonfinite(x, v)
+                        if bad != 0:
+                            iprm[b, BAD] = s
+                    s += 1
+
+    return advance
+
+
+def _obstacle_grid(p) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, float]]:
+    """M3's obstacles in the row-major cells of a dense grid over their bounding box
+    (cells of side obstacle_range + the largest disc radius, widened until at most
+    4 M + 16 cells): (centres, radii, cell starts, geometry) in cell order."""
+    centers = np.array([*p.obstacles, *(d.center for d in p.discs)],
+                       dtype=np.float64).reshape(-1, 2)
+    radii = np.array([0.0] * len(p.obstacles) + [d.radius for d in p.discs])
+    m = len(centers)
+    cap = p.obstacle_range + (float(radii.max()) if m else 0.0)
+    if m == 0:
+        geo = dict(ox=0.0, oy=0.0, w=1.0, nx=1, ny=1, x0=0.0, y0=0.0, x1=-1.0, y1=-1.0,
+                   cap=cap)
+        return centers, radii, np.zeros(2, dtype=np.int64), geo
+    lo, hi = centers.min(axis=0), centers.max(axis=0)
+    w = cap * _WIDEN
+    while (np.floor((hi - lo) / w) + 1).prod() > 4 * m + 16:
+        w *= 2.0
+    nx, ny = (int(k) for k in np.floor((hi - lo) / w) + 1)
+    cx = np.minimum(np.floor((centers[:, 0] - lo[0]) / w).astype(np.int64), nx - 1)
+    cy = np.minimum(np.floor((centers[:, 1] - lo[1]) / w).astype(np.int64), ny - 1)
+    key = cx + nx * cy
+    order = np.argsort(key, kind="stable")
+    start = np.concatenate([[0], np.cumsum(np.bincount(key, minlength=nx * ny))])
+    geo = dict(ox=lo[0], oy=lo[1], w=w, nx=nx, ny=ny, x0=lo[0] - cap, y0=lo[1] - cap,
+               x1=hi[0] + cap, y1=hi[1] + cap, cap=cap)
+    return centers[order], radii[order], start, geo
+
+
+def lambda2_rows(pos: np.ndarray, radii: np.ndarray | float, own: bool, inclusive: bool,
+                 components: np.ndarray, max_agents: int) -> np.ndarray:
+    """lambda_2 of the proximity graph of each snapshot (rows, N, 2), as the per-step path
+    computes it (`flocking_observe.algebraic_connectivity`): 0 when disconnected; at
+    N <= 32 the same dense eigvalsh, stacked over the rows."""
+    rows, n = pos.shape[:2]
+    out = np.zeros(rows)
+    if n < 2 or rows == 0:
+        return out
+    if n > fo.DENSE_EIG_MAX:
+        for t in range(rows):
+            if components[t] > 1:
+                continue
+            r = radii[t] if own else radii
+            u, v = fo.proximity_edges(pos[t], r, "own" if own else "min", inclusive)
+            out[t] = fo.algebraic_connectivity(fo.graph_matrix(n, u, v), int(components[t]),
+                                               max_agents)
+        return out
+    d = pos[:, None, :, :] - pos[:, :, None, :]
+    s2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
+    if own:
+        r2 = np.maximum(radii[:, :, None], radii[:, None, :]) ** 2
+    else:
+        r2 = float(radii) ** 2
+    adj = (s2 <= r2) if inclusive else (s2 < r2)
+    adj &= ~np.eye(n, dtype=bool)
+    lap = np.eye(n) * adj.sum(axis=2)[:, :, None] - adj
+    lam = np.maximum(np.linalg.eigvalsh(lap)[:, 1], 0.0)
+    return np.where(components > 1, 0.0, lam)
+
+
+class FlockingBatch:
+    """The state of a batch of M2 or M3 replicas (any N, graph, radius, obstacles, steps
+    each; one mode: fixed graph, switching, or M3), advanced window by window by
+    `advance_kernel`."""
+
+    def __init__(self, scenarios: list[Scenario]):
+        from .initial import initial_state
+
+        self.scenarios = scenarios
+        first = scenarios[0]
+        self.kind = first.model.kind
+        self.mode = ("mission" if self.kind == "flocking_obstacles"
+                     else first.model.topology)
+        fixed, mission = self.mode == "fixed", self.mode == "mission"
+        self.kernel = advance_kernel(MODES[self.mode])
+        B = len(scenarios)
+        ns = [s.n_agents for s in scenarios]
+        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
+        caps = [4 * n + 16 for n in ns]  # cells per replica (the cell budget) + 1
+        self.coff = np.concatenate([[0], np.cumsum(np.add(caps, 1))]).astype(np.int32)
+        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
+        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        total = int(self.aoff[-1])
+        prm = np.zeros((B, N_PRM))
+        iprm = np.zeros((B, N_IPRM), dtype=np.int32)
+        pos, vel = np.zeros((total, 2)), np.zeros((total, 2))
+        rad = np.zeros(total)
+        ptr, idx = [np.zeros(1, dtype=np.int64)], []
+        opos, orad, ostart = [], [], []
+        n_obst, n_ocell = 0, 0
+        self.vper, self.vwidth, voff = [], [], 0
+        self.graph_info, self.graph_obs = [], []
+        self.snap = []
+        for b, sc in enumerate(scenarios):
+            p = sc.model
+            n = ns[b]
+            a0 = int(self.aoff[b])
+            init = initial_state(sc)
+            pos[a0:a0 + n], vel[a0:a0 + n] = init.positions, init.velocities
+            a, c = p.potential.coefficients()
+            radius = sc.neighbours.radius if not fixed else 0.0
+            rad[a0:a0 + n] = radius
+            prm[b, [DT, A, C, R, R2]] = [sc.time.dt, a, c, radius, radius * radius]
+            vper = n <= p.valency_per_agent_max
+            self.vper.append(vper)
+            self.vwidth.append(n if vper else HIST)
+            iprm[b, [STEPS, EVERY, BAD, CELLS, INCL, VPER, VOFF]] = [
+                sc.time.steps, sc.recording.observables_every, -1,
+                int(not fixed and not p.uses_all_pairs(n)),
+                int(sc.inclusive) if not fixed else 0, int(vper), voff]
+            if not fixed:
+                voff += rows[b] * self.vwidth[b]
+            snap = not fixed and n <= p.lambda2_max_agents
+            self.snap.append(snap)
+            iprm[b, SNAP] = int(snap)
+            if fixed:
+                u, v = build_edges(p.graph, n, sc.seed)
+                indptr, indices = to_csr(n, u, v)
+                e0 = int(ptr[-1][-1])
+                ptr.append(e0 + indptr[1:].astype(np.int64))
+                idx.append(a0 + indices.astype(np.int64))
+                adj = fo.graph_matrix(n, u, v)
+                n_comp = fo.components(adj)
+                lam = fo.algebraic_connectivity(adj, n_comp, p.lambda2_max_agents)
+                self.graph_info.append({"edges": len(u), "components": n_comp,
+                                        "lambda2": lam})
+                self.graph_obs.append({"components": float(n_comp), "lambda2": lam,
+                                       **fo.valency_stats(np.diff(indptr),
+                                                          p.valency_per_agent_max)})
+            elif not mission:
+                # 1/2 sum_i sum_{j != i} V(R), the constant part of Q (eq. 10)
+                prm[b, QC] = 0.5 * n * (n - 1) * p.potential.value(radius)
+            if mission:
+                cen, orr, start, geo = _obstacle_grid(p)
+                prm[b, [CD, VMIN, STUCK2, FLOOR]] = [p.c_d, p.V_min, p.stuck_speed**2,
+                                                     p.radius_floor]
+                lam_nav = (p.obstacle_range**2 + 1.0) / p.obstacle_range**2
+                prm[b, [DX, DY, RANGE, LAMBDA, KAPPA]] = [*p.destination, p.obstacle_range,
+                                                          lam_nav, p.kappa]
+                prm[b, [OBX0, OBY0, OBX1, OBY1, OX, OY, OW, OCAP]] = [
+                    geo["x0"], geo["y0"], geo["x1"], geo["y1"], geo["ox"], geo["oy"],
+                    geo["w"], geo["cap"]]
+                iprm[b, [REVERY, ADAPT, DAMP, ONX, ONY, OCOFF, OM]] = [
+                    p.radius_every, int(p.adaptive_radius), DAMPING[p.damping_region],
+                    geo["nx"], geo["ny"], n_ocell, len(cen)]
+                opos.append(cen)
+                orad.append(orr)
+                ostart.append(n_obst + start)
+                n_obst += len(cen)
+                n_ocell += len(start)
+        self.B, self.total, self.rows = B, total, rows
+        # lambda_2 snapshots: K observation rows per replica per launch.
+        snap_agents = sum(3 * n for n, s in zip(ns, self.snap, strict=True) if s)
+        self.K = max(3, min(max(rows), SNAP_DOUBLES // max(snap_agents, 1)))
+        sizes = [self.K * 3 * n if s else 0 for n, s in zip(ns, self.snap, strict=True)]
+        self.sbase = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
+        everies = [s.recording.observables_every
+                   for s, on in zip(scenarios, self.snap, strict=True) if on]
+        self.chunk = max(1, (self.K - 2) * min(everies)) if everies else None
+        self.lam = [np.zeros(r) for r in rows]
+
+        def arr(a: np.ndarray, dtype=ti.f64) -> ti.Ndarray:
+            a = np.ascontiguousarray(a)
+            out = ti.ndarray(dtype, shape=a.shape)
+            out.from_numpy(a)
+            return out
+
+        def scratch(shape, dtype=ti.f64) -> ti.Ndarray:
+            return ti.ndarray(dtype, shape=shape)
+
+        i32 = ti.i32
+
+        def cat(parts, shape, dtype):
+            return np.concatenate(parts).astype(dtype) if parts else np.zeros(shape, dtype)
+
+        ptr_all = np.concatenate(ptr) if fixed else np.zeros(1)
+        self.args = dict(
+            aoff=arr(self.aoff, i32), coff=arr(self.coff, i32), ooff=arr(self.ooff, i32),
+            prm=arr(prm), iprm=arr(iprm, i32), pos=arr(pos), vel=arr(vel), rad=arr(rad),
+            ps=scratch((total, 7)), cell=scratch(total, i32),
+            cstart=scratch(int(self.coff[-1]), i32), cidx=scratch(total, i32),
+            parent=scratch(total, i32), csum=scratch((total, 3)),
+            mis=scratch((total if mission else 1, 4)), arc_lo=scratch(total),
+            arc_hi=scratch(total), ptr=arr(ptr_all.astype(np.int32), i32),
+            idx=arr(cat(idx, 1, np.int32), i32),
+            opos=arr(np.concatenate(opos) if n_obst else np.zeros((1, 2))),
+            orad=arr(np.concatenate(orad) if n_obst else np.zeros(1)),
+            ostart=arr(cat(ostart, 1, np.int32), i32),
+            obs=arr(np.zeros((int(self.ooff[-1]), N_OBS))),
+            val=arr(np.zeros(max(voff, 1), dtype=np.int32), i32),
+            snap=scratch(max(int(self.sbase[-1]), 1)), sbase=arr(self.sbase, i32),
+        )
+        self._order = list(self.args)
+
+    def advance(self, s0: int, s1: int) -> None:
+        """Advance every replica from step s0 towards s1 (each stops at its own end), in
+        launches of at most `chunk` steps while lambda_2 snapshots are taken."""
+        step = s1 - s0 if self.chunk is None else self.chunk
+        for a in range(s0, s1, step):
+            self.kernel(a, min(a + step, s1), *(self.args[k] for k in self._order))
+            if self.chunk is not None:
+                self._lambda2()
+
+    def _lambda2(self) -> None:
+        """lambda_2 of the observations the last launch took (rows SNAP0 .. NOBS)."""
+        iprm = self.status()
+        snap = self.args["snap"].to_numpy()
+        obs = None
+        for b, on in enumerate(self.snap):
+            r0, r1 = int(iprm[b, SNAP0]), int(iprm[b, NOBS])
+            if not on or r1 == r0:
+                continue
+            if obs is None:
+                obs = self.args["obs"].to_numpy()
+            sc = self.scenarios[b]
+            n = sc.n_agents
+            s = snap[self.sbase[b]:self.sbase[b] + (r1 - r0) * n * 3].reshape(r1 - r0, n, 3)
+            comps = obs[self.ooff[b] + r0:self.ooff[b] + r1, COL["components"]]
+            own = self.mode == "mission"
+            radii = s[:, :, 2] if own else sc.neighbours.radius
+            self.lam[b][r0:r1] = lambda2_rows(s[:, :, :2], radii, own, sc.inclusive, comps,
+                                              sc.model.lambda2_max_agents)
+
+    def end_at(self, step: int) -> None:
+        """Make `step` every replica's last (cancellation): the next window observes it."""
+        iprm = self.args["iprm"].to_numpy()
+        iprm[:, STEPS] = np.minimum(iprm[:, STEPS], step)
+        self.args["iprm"].from_numpy(iprm)
+
+    def status(self) -> np.ndarray:
+        """Per-replica integer slots (steps, observation count, divergence step, ...)."""
+        return self.args["iprm"].to_numpy()
+
+    def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
+        """The per-step path's series, in its order (kernels/flocking.py, obstacles.py)."""
+        nobs = int(iprm[b, NOBS])
+        o0 = self.ooff[b]
+        rows = self.args["obs"].to_numpy()[o0:o0 + nobs]
+        col = {k: rows[:, COL[k]] for k in OBS}
+        out = {"step": col["step"], **{k: col[k] for k in VELOCITY_KEYS}}
+        closest = {k: col[k] for k in ("min_distance", "min_pair_i", "min_pair_j")}
+        if self.mode == "fixed":
+            out["W"] = col["energy"]
+            g = self.graph_obs[b]
+            out.update({k: np.full(nobs, v) for k, v in g.items()})
+            out.update(closest)
+            return out
+        out["Q_reduced"] = col["energy"]
+        out["Q"] = col["energy"] + col["q_constant"]
+        out["components"] = col["components"]
+        out.update({k: col[k] for k in ("valency_mean", "valency_min", "valency_max")})
+        n, w = self.scenarios[b].n_agents, self.vwidth[b]
+        v0 = int(iprm[b, VOFF])
+        val = self.args["val"].to_numpy()[v0:v0 + nobs * w].reshape(nobs, w)
+        val = val.astype(np.float64)
+        if self.vper[b]:
+            out.update({f"valency_{i}": val[:, i] for i in range(n)})
+        else:
+            out.update({f"valency_hist_{k}": val[:, k] for k in range(fo.HIST_BINS)})
+            out[f"valency_hist_{fo.HIST_BINS}plus"] = val[:, fo.HIST_BINS]
+        out.update(closest)
+        out["lambda2"] = (self.lam[b][:nobs] if self.snap[b]
+                          else np.full(nobs, fo.NOT_COMPUTED))
+        if self.mode == "mission":
+            out.update({k: col[k] for k in MISSION_KEYS})
+        return out
+
+    def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
+        a0, a1 = self.aoff[b], self.aoff[b + 1]
+        out = {}
+        if "position" in arrays:
+            out["position"] = self.args["pos"].to_numpy()[a0:a1]
+        if "velocity" in arrays or "heading" in arrays:
+            vel = self.args["vel"].to_numpy()[a0:a1]
+            if "velocity" in arrays:
+                out["velocity"] = vel
+            if "heading" in arrays:
+                out["heading"] = np.arctan2(vel[:, 1], vel[:, 0])
+        return out
+
+    def convergence_keys(self) -> list[str]:
+        return (["velocity_disagreement_components"] if self.mode == "mission"
+                else ["velocity_disagreement"])
+
+    def extra(self, b: int, iprm: np.ndarray) -> dict[str, Any]:
+        """closest_approach (the first closest observation), the fixed graph, and M3's
+        radius halvings and increases, as the per-step path reports them."""
+        obs = self.observables(b, iprm)
+        closest: dict[str, Any] = {}
+        if len(obs["step"]):
+            t = int(np.argmin(obs["min_distance"]))
+            closest = {"distance": float(obs["min_distance"][t]),
+                       "pair": [int(obs["min_pair_i"][t]), int(obs["min_pair_j"][t])],
+                       "time": float(obs["step"][t]) * self.scenarios[b].time.dt}
+        out: dict[str, Any] = {"closest_approach": closest}
+        if self.mode == "fixed":
+            out["graph"] = self.graph_info[b]
+        if self.mode == "mission":
+            out["adaptive_radius"] = {"halvings": int(iprm[b, HALVED]),
+                                      "increases": int(iprm[b, GROWN])}
+        return out
+
+    def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
+        """(step, quantity, cause) in the per-step path's words, or None."""
+        from .flocking import DIVERGED_CAUSE
+
+        step = int(iprm[b, BAD])
+        if step < 0:
+            return None
+        if iprm[b, CAUSE] == 0:
+            return step, "position/velocity", DIVERGED_CAUSE
+        span = float(self.args["prm"].to_numpy()[b, SPAN])
+        if not np.isfinite(span):
+            return step, "position", "a position became non-finite"
+        return step, "position", (
+            f"the swarm spans {span:.3g} length units, over 2^30 neighbour radii "
+            "(agents escaping: dt too large or forces unbounded)")
+
+    @staticmethod
+    def batch_key(scenario: Scenario) -> tuple | None:
+        """Scenarios with the same key share a launch; None (the per-step path) for the
+        rk4 integrator and for M3's radius_rule "min"."""
+        p = scenario.model
+        if p.integrator != "semi_implicit_euler":
+            return None
+        if p.kind == "flocking_obstacles":
+            return ("flocking_obstacles",) if p.radius_rule == "own" else None
+        return ("flocking", p.topology)

@@ -1,0 +1,191 @@
+"""The fused small-N path of M2 and M3 (kernels/flocking_fused.py): a replica gives the
+same bits alone, in a batch, cut into any windows, and the same prefix when cancelled; it
+agrees with the per-step path; the engine picks the path from the scenario alone.
+
+(The family runs on the plane only, so there is no periodic case.)"""
+
+import numpy as np
+import pytest
+
+import kernels
+from kernels import batch, engine, flocking_fused
+from schemas import Scenario
+from tests.test_flocking_reference import lattice, m2_scenario, m3_scenario
+
+
+class Frames:
+    """A FrameSink keeping every frame in memory (small runs only)."""
+
+    def __init__(self):
+        self.steps, self.frames = [], []
+
+    def frame(self, step, time, arrays):
+        self.steps.append(step)
+        self.frames.append(arrays)
+
+
+def with_recording(sc: Scenario, **recording) -> Scenario:
+    spec = sc.model_dump(mode="json")
+    spec["recording"].update(recording, arrays=["position", "velocity"])
+    return Scenario.model_validate(spec)
+
+
+def obstacles_world(n: int, seed: int, **model) -> Scenario:
+    return m3_scenario(n=n, steps=60, seed=seed, **model)
+
+
+def sprawling(n: int = 70) -> Scenario:
+    """Two flocks 1000 apart: more cells than the budget, so hashed buckets."""
+    init = lattice(n, 1.1, 3)
+    init["positions"][n - 10:] = [[1000.0 + 1.1 * i, -500.0] for i in range(10)]
+    return Scenario.model_validate({
+        "model": {"kind": "flocking"}, "space": {"kind": "plane"},
+        "neighbours": {"radius": 2.0}, "initial": init, "time": {"steps": 20, "dt": 0.01},
+    })
+
+
+# Mixes a sweep would batch together: different N (all pairs and cells), graphs, radii,
+# obstacles, steps, seeds and observation cadences.
+MIXES = {
+    "fixed": [
+        m2_scenario("fixed", n=10, steps=40, graph={"kind": "ring"}),
+        m2_scenario("fixed", n=80, steps=30, seed=2, spacing=1.2),
+        with_recording(m2_scenario("fixed", n=30, steps=33, graph={"kind": "complete"},
+                                   dt=0.005), observables_every=4),
+    ],
+    "switching": [
+        m2_scenario(n=10, steps=40),
+        m2_scenario(n=100, steps=30, seed=2, R=2.5, d=1.3, spacing=1.2),
+        with_recording(m2_scenario(n=40, steps=37, seed=3, R=1.6, inclusive=True,
+                                   search="grid"), observables_every=3),
+        m2_scenario(n=70, steps=25, seed=4, search="all_pairs"),
+        sprawling(),
+    ],
+    "mission": [
+        obstacles_world(5, 1),
+        obstacles_world(90, 2, neighbour_search="auto", kappa=2.0),
+        obstacles_world(12, 3, damping_region="below_vmin", radius_every=7),
+        obstacles_world(20, 4, obstacles=[], discs=[], damping_region="everywhere"),
+    ],
+}
+
+
+def fixed_windows(monkeypatch, agent_steps: int) -> None:
+    """Windows of a fixed number of agent-steps (where the driver sizes later windows by
+    their measured time, WINDOW_SECONDS, that is turned off too)."""
+    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", agent_steps)
+    monkeypatch.setattr(batch, "WINDOW_SECONDS", None, raising=False)
+
+
+def same_result(a, b):
+    assert a.status == b.status and a.steps == b.steps
+    assert list(a.observables) == list(b.observables)
+    for k in a.observables:
+        assert np.array_equal(a.observables[k], b.observables[k]), k
+    for k in ("closest_approach", "graph", "adaptive_radius"):
+        assert a.extra.get(k) == b.extra.get(k), k
+
+
+@pytest.mark.parametrize("mode", list(MIXES))
+def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, mode):
+    scenarios = MIXES[mode]
+    together = kernels.run_batch(scenarios)
+    assert len(engine._batches(scenarios)) == 1  # one launch for all of them
+    for sc, res in zip(scenarios, together, strict=True):
+        assert res.extra["engine_path"] == "fused"
+        same_result(res, kernels.run(sc))
+
+
+@pytest.mark.parametrize("mode", list(MIXES))
+def test_the_fused_path_agrees_with_the_per_step_path(taichi_cpu, monkeypatch, mode):
+    """Every observable, the extras and the frames, to rounding (the summation order
+    differs): the largest scenario of each mix (cells, obstacles, lambda_2 by eigsh)."""
+    sc = with_recording(max(MIXES[mode], key=lambda s: s.n_agents), every=10)
+    fused_sink, step_sink = Frames(), Frames()
+    fused = kernels.run(sc, sink=fused_sink)
+    monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+    per_step = kernels.run(sc, sink=step_sink)
+    assert (fused.extra["engine_path"], per_step.extra["engine_path"]) == ("fused", "per_step")
+    assert fused.status == per_step.status == "completed"
+    assert list(fused.observables) == list(per_step.observables)
+    for k, v in per_step.observables.items():
+        np.testing.assert_allclose(fused.observables[k], v, rtol=1e-9, atol=1e-9, err_msg=k)
+    assert fused.extra.get("graph") == per_step.extra.get("graph")
+    assert fused.extra.get("adaptive_radius") == per_step.extra.get("adaptive_radius")
+    assert fused.extra["closest_approach"]["pair"] == per_step.extra["closest_approach"]["pair"]
+    assert fused_sink.steps == step_sink.steps == [*range(0, sc.time.steps, 10), sc.time.steps]
+    for f, g in zip(fused_sink.frames, step_sink.frames, strict=True):
+        for k in g:
+            np.testing.assert_allclose(f[k], g[k], rtol=1e-9, atol=1e-12, err_msg=k)
+
+
+def test_windows_frames_and_snapshot_launches_do_not_change_a_bit(taichi_cpu, monkeypatch):
+    sc = MIXES["switching"][1]  # N = 100 in cells; lambda_2 from snapshots
+    whole = kernels.run(sc)
+    sink = Frames()
+    framed = kernels.run(with_recording(sc, every=7), sink=sink)
+    assert sink.steps == [*range(0, 30, 7), 30]
+    fixed_windows(monkeypatch, 100 * 3)  # windows of 3 steps
+    cut = kernels.run(sc)
+    monkeypatch.setattr(flocking_fused, "SNAP_DOUBLES", 1)  # lambda_2 every launch of 1 step
+    snapped = kernels.run(sc)
+    for res in (framed, cut, snapped):
+        same_result(whole, res)
+    assert whole.observables["lambda2"].min() > 0  # computed, and connected
+
+
+def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, monkeypatch):
+    sc = MIXES["mission"][1]
+    whole = kernels.run(sc)
+    fixed_windows(monkeypatch, sc.n_agents * 10)  # windows of 10 steps
+    polls = iter([False, True])
+    part = kernels.run(sc, should_stop=lambda: next(polls))
+    assert part.status == "cancelled" and part.steps == 20
+    assert np.array_equal(part.observables["step"], np.arange(21))
+    for k in whole.observables:
+        assert np.array_equal(part.observables[k], whole.observables[k][:21]), k
+
+
+def test_divergence_stops_only_its_replica(taichi_cpu):
+    good = MIXES["switching"][0]
+    init = lattice(10, 1.1, 5)
+    init["positions"][3] = init["positions"][4]  # two agents at the same point
+    bad = Scenario.model_validate({**good.model_dump(mode="json"), "initial": init})
+    res = kernels.run_batch([good, bad])
+    assert res[0].status == "completed" and res[0].steps == 40
+    assert res[1].status == "diverged" and res[1].steps == res[1].error["step"] == 0
+    assert "same point" in res[1].error["cause"]
+    assert res[1].error["quantity"] == "position/velocity"
+    assert len(res[1].observables["step"]) == 1  # X(0) was observed before the blow-up
+    same_result(res[0], kernels.run(good))
+
+
+def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
+    euler = m2_scenario(n=10, steps=1)
+    rk4 = m2_scenario(n=10, steps=1, integrator="rk4")
+    min_rule = m3_scenario(n=5, steps=1, radius_rule="min")
+    assert engine.fused_batch(euler, "cpu") is flocking_fused.FlockingBatch
+    assert engine.fused_batch(MIXES["mission"][0], "cpu") is flocking_fused.FlockingBatch
+    assert engine.fused_batch(rk4, "cpu") is None
+    assert engine.fused_batch(min_rule, "cpu") is None
+    assert engine.fused_batch(euler, "cuda") is None
+    mixed = [euler, rk4, MIXES["fixed"][0], euler, MIXES["mission"][0]]
+    assert sorted(map(sorted, engine._batches(mixed))) == [[0, 3], [1], [2], [4]]
+    assert kernels.run(rk4).extra["engine_path"] == "per_step"
+
+
+def test_a_runaway_swarm_is_reported_as_the_per_step_path_reports_it(taichi_cpu, monkeypatch):
+    """A pair 1e-6 apart is blown 4e14 apart in one step: the cell list refuses a swarm
+    over 2^30 radii wide, at the same step and in the same words on both paths."""
+    init = lattice(80, 1.1, 3)
+    init["positions"][1] = [init["positions"][0][0] + 1e-6, init["positions"][0][1]]
+    sc = Scenario.model_validate({
+        "model": {"kind": "flocking"}, "space": {"kind": "plane"},
+        "neighbours": {"radius": 2.0}, "initial": init, "time": {"steps": 20, "dt": 0.01},
+    })
+    fused = kernels.run(sc)
+    monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+    per_step = kernels.run(sc)
+    assert fused.extra["engine_path"] == "fused" and fused.status == "diverged"
+    assert fused.error == per_step.error
+    assert fused.error["step"] == 1 and "2^30 neighbour radii" in fused.error["cause"]
