@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import kernels
-from kernels import batch, engine, flocking_fused
+from kernels import engine, flocking_fused
 from schemas import Scenario
 from tests.test_flocking_reference import lattice, m2_scenario, m3_scenario
 
@@ -70,13 +70,6 @@ MIXES = {
 }
 
 
-def fixed_windows(monkeypatch, agent_steps: int) -> None:
-    """Windows of a fixed number of agent-steps (where the driver sizes later windows by
-    their measured time, WINDOW_SECONDS, that is turned off too)."""
-    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", agent_steps)
-    monkeypatch.setattr(batch, "WINDOW_SECONDS", None, raising=False)
-
-
 def same_result(a, b):
     assert a.status == b.status and a.steps == b.steps
     assert list(a.observables) == list(b.observables)
@@ -119,13 +112,14 @@ def test_the_fused_path_agrees_with_the_per_step_path(taichi_cpu, monkeypatch, m
             np.testing.assert_allclose(f[k], g[k], rtol=1e-9, atol=1e-12, err_msg=k)
 
 
-def test_windows_frames_and_snapshot_launches_do_not_change_a_bit(taichi_cpu, monkeypatch):
+def test_windows_frames_and_snapshot_launches_do_not_change_a_bit(taichi_cpu, monkeypatch,
+                                                                    fixed_windows):
     sc = MIXES["switching"][1]  # N = 100 in cells; lambda_2 from snapshots
     whole = kernels.run(sc)
     sink = Frames()
     framed = kernels.run(with_recording(sc, every=7), sink=sink)
     assert sink.steps == [*range(0, 30, 7), 30]
-    fixed_windows(monkeypatch, 100 * 3)  # windows of 3 steps
+    fixed_windows(100 * 3)  # windows of 3 steps
     cut = kernels.run(sc)
     monkeypatch.setattr(flocking_fused, "SNAP_DOUBLES", 1)  # lambda_2 every launch of 1 step
     snapped = kernels.run(sc)
@@ -134,10 +128,10 @@ def test_windows_frames_and_snapshot_launches_do_not_change_a_bit(taichi_cpu, mo
     assert whole.observables["lambda2"].min() > 0  # computed, and connected
 
 
-def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, monkeypatch):
+def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, fixed_windows):
     sc = MIXES["mission"][1]
     whole = kernels.run(sc)
-    fixed_windows(monkeypatch, sc.n_agents * 10)  # windows of 10 steps
+    fixed_windows(sc.n_agents * 10)  # windows of 10 steps
     polls = iter([False, True])
     part = kernels.run(sc, should_stop=lambda: next(polls))
     assert part.status == "cancelled" and part.steps == 20
