@@ -71,7 +71,7 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
 
             outcome = run_sweep_order(order, conn, should_stop)
         else:
-            outcome = _run_order(execute_to_dir, order, on_progress, should_stop)
+            outcome = _run_order(order, on_progress, should_stop)
         outcome["rss"] = _rss_bytes()
         try:
             conn.send(("result", token, outcome))
@@ -79,8 +79,7 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
             return
 
 
-def _run_order(execute_to_dir: Any, order: dict[str, Any], on_progress: Any, should_stop: Any
-               ) -> dict[str, Any]:
+def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dict[str, Any]:
     """Re-validate and run one attempt; every failure becomes a problem body."""
     from pydantic import ValidationError
 
@@ -97,21 +96,39 @@ def _run_order(execute_to_dir: Any, order: dict[str, Any], on_progress: Any, sho
     if errors:
         return {"problem": problem("limit-exceeded", "Over this service's limits", 422,
                                    errors[0].msg, errors=[e.model_dump() for e in errors])}
-    if scenario.threads is None and order.get("threads"):
+    from service.sweeps.executors import make_executor
+    from service.sweeps.ray_executor import ClusterError
+
+    executor = make_executor(order.get("executor"))
+    on_ray = (order.get("executor") or {}).get("kind") == "ray"
+    if scenario.threads is None and order.get("threads") and not on_ray:
         # Thread count = the CPUs this worker is allotted (R13); the user's choice wins.
+        # (A Ray task gets its own: the CPUs it reserved on the cluster.)
         scenario = scenario.model_copy(update={"threads": order["threads"]})
     out_dir = Path(order["out_dir"])
     try:
-        summary = execute_to_dir(scenario, out_dir, on_progress=on_progress,
-                                 should_stop=should_stop)
+        summary = executor.run_job(scenario, out_dir, on_progress=on_progress,
+                                   should_stop=should_stop)
     except BackendUnavailable as exc:
         return {"problem": problem("backend-unavailable", "Backend unavailable", 503, str(exc),
                                    backend=scenario.backend)}
+    except ClusterError as exc:
+        return {"problem": cluster_problem(exc)}
     except Exception as exc:  # an engine bug must fail this job, not the worker
         log.error("job %s failed:\n%s", order["job_id"], traceback.format_exc())
         return {"problem": problem("internal-error", "Internal error", 500,
                                    f"{type(exc).__name__}: {exc}")}
     return {"summary": summary, "checksums": checksums(out_dir)}
+
+
+def cluster_problem(exc: Any) -> dict[str, Any]:
+    """The problem body of a ClusterError (cluster unreachable, or lost mid-job)."""
+    from service.sweeps.ray_executor import ClusterUnavailable
+
+    slug, title = (("cluster-unavailable", "Ray cluster unavailable")
+                   if isinstance(exc, ClusterUnavailable) else
+                   ("cluster-task-lost", "Ray task lost"))
+    return problem(slug, title, 503, str(exc), ray_address=exc.address)
 
 
 def _warm_up(execute_to_dir: Any, preset: str, scratch: Path) -> None:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import socket
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -38,6 +39,7 @@ from .executors import BATCH_RUNS, ExecutorConfig, ResultFn, StopFn
 if TYPE_CHECKING:
     from kernels import RunResult
 
+CONNECT_SECONDS = 5.0  # a cluster address that does not accept a connection in this is down
 WAIT_SECONDS = 0.2  # how often should_stop is asked while tasks run
 HEALTH_SECONDS = 10.0  # silence after which the driver checks that the cluster is there
 CHUNKS_PER_CPU = 4  # a sweep is cut into about this many tasks per cluster CPU
@@ -78,6 +80,7 @@ def connect(address: str) -> Any:
         if _connected == address:
             return ray
         ray.shutdown()
+    _reachable(address)
     try:
         ray.init(address=address, log_to_driver=False, logging_level="WARNING",
                  configure_logging=True)
@@ -86,7 +89,40 @@ def connect(address: str) -> Any:
         raise ClusterUnavailable(address, f"cannot connect to the Ray cluster at "
                                  f"{address}: {type(exc).__name__}: {exc}") from None
     _connected = address
+    _errors_to_stderr()
     return ray
+
+
+def _errors_to_stderr() -> None:
+    """Ray's driver prints the cluster's error messages ("a worker died ...") on stdout,
+    which is the CLI's machine-readable channel (one JSON line): send them to stderr."""
+    from ray._private import worker
+
+    original = getattr(worker, "print_to_stdstream", None)
+    if original is None or getattr(original, "_flocklab", False):
+        return
+
+    def to_stderr(data: dict[str, Any], ignore_prefix: bool) -> None:
+        original({**data, "is_err": True}, ignore_prefix)
+
+    to_stderr._flocklab = True  # type: ignore[attr-defined]
+    worker.print_to_stdstream = to_stderr
+
+
+def _reachable(address: str, timeout: float = CONNECT_SECONDS) -> None:
+    """ClusterUnavailable unless host:port (or ray://host:port) accepts a TCP connection:
+    `ray.init` retries an unreachable address for ever, so it is checked first."""
+    if address == "auto":
+        return  # Ray finds the local cluster itself and fails at once without one
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except ValueError:
+        raise ClusterUnavailable(address, f"not a Ray cluster address: {address!r} (use "
+                                 "auto, host:port or ray://host:port)") from None
+    except OSError as exc:
+        raise ClusterUnavailable(address, f"cannot connect to the Ray cluster at {address}: "
+                                 f"{exc.strerror or exc}") from None
 
 
 def disconnect() -> None:
