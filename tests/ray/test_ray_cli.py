@@ -153,8 +153,7 @@ def test_the_second_node_killed_its_tasks_rerun_on_the_head(ray_cluster: LocalRa
     proc = subprocess.Popen(sweep_cmd(spec, out, ray_cluster.address),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 90
-    second = set(ray_cluster.second_node_pids())
-    while not second & set(ray_cluster.pids("ray::run_chunk")):
+    while not set(ray_cluster.second_node_pids()) & set(ray_cluster.pids("ray::run_chunk")):
         assert time.monotonic() < deadline, "no task ran on the second node"
         time.sleep(0.1)
     try:
