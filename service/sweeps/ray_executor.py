@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 
 CONNECT_SECONDS = 5.0  # a cluster address that does not accept a connection in this is down
 WAIT_SECONDS = 0.2  # how often should_stop is asked while tasks run
-HEALTH_SECONDS = 10.0  # silence after which the driver checks that the cluster is there
+HEALTH_SECONDS = 5.0  # silence after which the driver checks that the cluster is there
 CHUNKS_PER_CPU = 4  # a sweep is cut into about this many tasks per cluster CPU
 
 _connected: str | None = None  # the address this process's driver is connected to
@@ -279,17 +279,20 @@ class RayExecutor:
                 f"its retry ({type(exc).__name__}: {str(exc).splitlines()[0]})") from None
 
     def _check_alive(self, ray: Any) -> None:
-        """ClusterTaskLost when the cluster no longer answers (its head is gone)."""
+        """ClusterTaskLost when the cluster's head no longer accepts connections. (Asked
+        through Ray, a lost head blocks the call for a minute, after which Ray ends this
+        process: so the driver probes the head's port itself.)"""
         try:
-            alive = [n for n in ray.nodes() if n.get("Alive")]
-        except Exception as exc:
-            disconnect()
-            raise ClusterTaskLost(self.address, f"lost the Ray cluster at {self.address}: "
-                                  f"{type(exc).__name__}: {exc}") from None
-        if not alive:
-            disconnect()
-            raise ClusterTaskLost(self.address,
-                                  f"the Ray cluster at {self.address} has no live node")
+            gcs = ray.get_runtime_context().gcs_address
+        except Exception:
+            gcs = self.address
+        try:
+            _reachable(gcs)
+        except ClusterUnavailable as exc:
+            global _connected
+            _connected = None  # reconnect on the next use; the old session is dead
+            raise ClusterTaskLost(self.address, f"lost the Ray cluster at {self.address} "
+                                  f"mid-run: its head ({gcs}) does not answer") from exc
 
 
 _CANCELLED = object()

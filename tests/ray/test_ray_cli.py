@@ -67,6 +67,12 @@ def run_indices(out: Path) -> list[int]:
     return [int(line.split(",")[0]) for line in lines]
 
 
+def read_journal_count(out: Path) -> int:
+    """Runs recorded in the sweep's journal."""
+    path = out / "runs.jsonl"
+    return len(path.read_text().splitlines()) if path.exists() else 0
+
+
 def wait_for_task(cluster: LocalRayCluster, timeout: float = 90) -> list[int]:
     """Pids of Ray workers running one of our chunks (Ray titles them ray::run_chunk)."""
     deadline = time.monotonic() + timeout
