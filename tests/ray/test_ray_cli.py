@@ -105,7 +105,7 @@ def test_same_bits_as_local_table_series_and_trajectories(ray_cluster: LocalRayC
 
 def test_ctrl_c_cancels_the_outstanding_tasks_and_resume_finishes(
         ray_cluster: LocalRayCluster, tmp_path: Path):
-    doc = sweep_doc(steps=4000, n=100, etas=(0.5, 1.0, 2.0, 3.0), replicas=2)
+    doc = sweep_doc(steps=2500, n=100, etas=(0.5, 1.0, 2.0, 3.0), replicas=2)
     spec, out = write(tmp_path, doc), tmp_path / "out"
     proc = subprocess.Popen(sweep_cmd(spec, out, ray_cluster.address),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
