@@ -77,6 +77,7 @@ def single(sizes: list[int], steps: int) -> None:
 def sweep_spec() -> dict:
     base = vicsek_scenario(100, 5.0, 0.5, STEPS)
     del base["threads"]  # the sweep uses every core
+    base["recording"]["observables"] = ["polarization"]  # what the cKDTree script computes
     return {
         "name": "bench-fig2a-reduced",
         "base": base,

@@ -64,6 +64,24 @@ def trajectory_params(start: int | None, stop: int | None, stride: int,
     return params
 
 
+def snapshot_params(frame: int | None, time: float | None, width: int, height: int,
+                    field: str, edges: bool | None, trails: int | None, overlays: bool
+                    ) -> dict[str, Any]:
+    """Query of `GET /v1/jobs/{id}/render/snapshot.png` (None: the server's default)."""
+    given = {"frame": frame, "time": time, "width": width, "height": height, "field": field,
+             "edges": edges, "trails": trails, "overlays": overlays}
+    return {k: (str(v).lower() if isinstance(v, bool) else v) for k, v in given.items()
+            if v is not None}
+
+
+def save_or_return(content: bytes, path: str | Path | None) -> bytes | Path:
+    if path is None:
+        return content
+    path = Path(path)
+    path.write_bytes(content)
+    return path
+
+
 def _agents(agents: slice | Sequence[int] | str) -> str:
     if isinstance(agents, str):
         return agents

@@ -170,6 +170,16 @@ class AsyncJob(_core.JobState):
         r = await self.client.request("GET", f"/v1/jobs/{self.id}/trajectory", params=params)
         return _core.load_npz(r.content)
 
+    async def snapshot(self, path: str | Path | None = None, *, frame: int | None = None,
+                       time: float | None = None, width: int = 800, height: int = 800,
+                       field: str = "auto", edges: bool | None = None,
+                       trails: int | None = None, overlays: bool = True) -> bytes | Path:
+        params = _core.snapshot_params(frame, time, width, height, field, edges, trails,
+                                       overlays)
+        r = await self.client.request("GET", f"/v1/jobs/{self.id}/render/snapshot.png",
+                                      params=params, timeout=max(self.client.timeout, 330.0))
+        return _core.save_or_return(r.content, path)
+
     async def download(self, path: str | Path) -> Path:
         path = Path(path)
         digest = hashlib.sha256()

@@ -195,6 +195,19 @@ class Job(_core.JobState):
         r = self.client.request("GET", f"/v1/jobs/{self.id}/trajectory", params=params)
         return _core.load_npz(r.content)
 
+    def snapshot(self, path: str | Path | None = None, *, frame: int | None = None,
+                 time: float | None = None, width: int = 800, height: int = 800,
+                 field: str = "auto", edges: bool | None = None, trails: int | None = None,
+                 overlays: bool = True) -> bytes | Path:
+        """A frame drawn as the papers do (PNG; default the last frame): its bytes, or
+        saved to `path`. `field`: auto, arrows, density or polarization; `trails`: frames
+        of path behind each agent (0: all); `edges`: default at N <= 200."""
+        params = _core.snapshot_params(frame, time, width, height, field, edges, trails,
+                                       overlays)
+        r = self.client.request("GET", f"/v1/jobs/{self.id}/render/snapshot.png",
+                                params=params, timeout=max(self.client.timeout, 330.0))
+        return _core.save_or_return(r.content, path)
+
     def download(self, path: str | Path) -> Path:
         """Save the whole H5MD file, streamed, and check its sha-256."""
         path = Path(path)

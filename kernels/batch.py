@@ -3,8 +3,9 @@
 A batch (e.g. `VicsekBatch`) holds many replicas' state on the device and advances all of
 them through a window of steps in one launch, writing the observables into a buffer. The
 driver only picks the windows: each ends at the next frame to record, or after about
-`WINDOW_AGENT_STEPS` agent-steps, so progress and cancellation are polled a few times a
-second. Window boundaries never change a bit of any replica.
+`WINDOW_SECONDS` of work (the first window is `WINDOW_AGENT_STEPS` agent-steps, later ones
+are sized from the measured rate), so progress and cancellation are polled about ten times
+a second. Window boundaries never change a bit of any replica.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ from schemas import Scenario
 
 from .result import FrameSink, RunResult
 
-WINDOW_AGENT_STEPS = 2_000_000  # about 0.1-0.3 s of work between host visits
+WINDOW_AGENT_STEPS = 100_000  # the first window: a few ms to tens of ms of work
+WINDOW_SECONDS: float | None = 0.1  # later windows' target length (None: keep the first)
 
 
 class Batch(Protocol):
@@ -81,7 +83,11 @@ def run_batch(
         for b, k in enumerate(frame_every):  # stop at the next frame to record
             if k and s < steps[b]:
                 nxt = min(nxt, (s // k + 1) * k, steps[b])
+        started = time.perf_counter()
         batch.advance(s, nxt)
+        took = time.perf_counter() - started
+        if WINDOW_SECONDS is not None and nxt - s >= window and took > 0:
+            window = max(1, min(8 * window, int(window * WINDOW_SECONDS / took)))
         s = nxt
         if any(frame_every):
             record(s, batch.status())

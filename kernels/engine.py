@@ -15,7 +15,7 @@ import numpy as np
 from schemas import Scenario
 
 from . import batch, runtime
-from .model import ModelKernel
+from .model import ModelKernel, kernel_for
 from .result import FrameSink, RunResult, SimulationDiverged
 
 ProgressFn = Callable[[int, int], None]
@@ -43,7 +43,7 @@ def run(
         return batch.run_batch(make, [scenario], backend=rt.backend, sinks=[sink],
                                on_progress=on_progress, should_stop=should_stop)[0]
     t0 = time.perf_counter()
-    model: ModelKernel = _registry()[scenario.model.kind](scenario)
+    model: ModelKernel = kernel_for(scenario.model.kind)(scenario)
     setup_seconds = time.perf_counter() - t0
     rec = scenario.recording
     steps = scenario.time.steps
@@ -81,6 +81,10 @@ def run(
             if on_progress is not None and now - last_progress >= PROGRESS_INTERVAL:
                 last_progress = now
                 on_progress(done, steps)
+        # The final state, observed (its grid build may still find a runaway) and recorded.
+        if not series["step"] or series["step"][-1] != done:
+            observe(done)
+        record(done)
     except SimulationDiverged as exc:
         status = "diverged"
         error = {
@@ -90,14 +94,12 @@ def run(
             "cause": exc.cause,
             "message": str(exc),
         }
-    if status != "diverged":
-        if not series["step"] or series["step"][-1] != done:
-            observe(done)
-        record(done)
-        if on_progress is not None:
-            on_progress(done, steps)
+    if status != "diverged" and on_progress is not None:
+        on_progress(done, steps)
     wall = time.perf_counter() - t0
-    obs = {k: np.asarray(v, dtype=np.float64) for k, v in series.items()}
+    chosen = rec.observables
+    obs = {k: np.asarray(v, dtype=np.float64) for k, v in series.items()
+           if chosen is None or k in ("step", "time") or k in chosen}
     final = {k: float(v[-1]) for k, v in obs.items() if len(v)}
     tol = scenario.convergence.tolerance
     convergence = {k: time_to_converge(obs["time"], obs[k], tol)
@@ -119,22 +121,16 @@ def run(
 ResultFn = Callable[[int, RunResult], None]
 # The small-N path runs one replica per CPU task, serially inside: it beats the per-step
 # path (parallel over agents, one launch per pass) up to about this N on this CPU.
-FUSED_MAX_N = 20_000
+FUSED_MAX_N = 10_000
 # Replicas per fused launch: enough to fill the cores, few enough to poll for a stop.
 BATCH_AGENTS = 400_000
-
-
-def _registry() -> dict[str, type[ModelKernel]]:
-    from . import models  # registers every model kernel (imports Taichi, never ti.init)
-
-    return models.KERNELS
 
 
 def fused_batch(scenario: Scenario, backend: str) -> Callable | None:
     """The fused small-N batch class for `scenario`, or None for the per-step path. Decided
     from the scenario (and the backend that runs it) alone, so a run's bits never depend
     on the company it keeps."""
-    cls = _registry()[scenario.model.kind].batch
+    cls = kernel_for(scenario.model.kind).batch
     if cls is None or backend != "cpu" or scenario.n_agents > FUSED_MAX_N:
         return None
     return cls if cls.batch_key(scenario) is not None else None
@@ -178,7 +174,7 @@ def _batches(scenarios: Sequence[Scenario]) -> list[list[int]]:
     groups: dict[tuple, list[list[int]]] = {}
     out: list[list[int]] = []
     for i, sc in enumerate(scenarios):
-        cls = _registry()[sc.model.kind].batch
+        cls = kernel_for(sc.model.kind).batch
         key = None if cls is None or sc.n_agents > FUSED_MAX_N else cls.batch_key(sc)
         if key is None:
             out.append([i])

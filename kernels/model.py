@@ -2,11 +2,12 @@
 
 The engine drives a `ModelKernel` through `observe -> step -> ... -> observe`; it knows
 nothing of any model's equations. A new model family is one module with a subclass
-decorated `@register_kernel`, imported in `kernels/models.py`.
+decorated `@register_kernel`, named in `MODULES` below.
 """
 
 from __future__ import annotations
 
+import importlib
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
@@ -51,6 +52,22 @@ class ModelKernel(ABC):
 
 
 KERNELS: dict[str, type[ModelKernel]] = {}
+# Each family's module, which registers its kernel on import (one line per family). The
+# engine imports a family only when a scenario of that kind runs: importing them all costs
+# about a second of Python at every start, which a short run or a sweep worker would pay.
+MODULES = {
+    "vicsek": "kernels.vicsek",
+    "flocking": "kernels.flocking",
+    "flocking_obstacles": "kernels.obstacles",
+    "formation": "kernels.formation",
+}
+
+
+def kernel_for(kind: str) -> type[ModelKernel]:
+    """The kernel class of model `kind`, importing its family's module on first use."""
+    if kind not in KERNELS:
+        importlib.import_module(MODULES[kind])
+    return KERNELS[kind]
 
 
 def register_kernel(cls: type[ModelKernel]) -> type[ModelKernel]:

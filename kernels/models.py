@@ -1,9 +1,11 @@
-"""Every model family's kernel: one registration line per family."""
+"""The full kernel registry, every family imported (for tooling and tests); the engine
+imports only the family a scenario needs, through `kernels.model.kernel_for`."""
 
-from . import vicsek  # noqa: F401
-from .flocking import FlockingKernel  # noqa: F401
-from .formation import FormationKernel  # noqa: F401
-from .model import KERNELS
-from .obstacles import ObstacleFlockingKernel  # noqa: F401
+import importlib
+
+from .model import KERNELS, MODULES
+
+for _module in MODULES.values():
+    importlib.import_module(_module)
 
 __all__ = ["KERNELS"]

@@ -3,16 +3,23 @@
 Facts this module relies on (../shared/RELIABILITY.md, taichi 1.7.4):
 - `ti.init(arch=ti.gpu)` or `opengl` can segfault on a machine without a GPU, and
   `arch=ti.cuda` silently falls back to the CPU. So "auto" probes each GPU backend in a
-  spawned child process first, and every explicit GPU request is checked after init.
+  child process first, and every explicit GPU request is checked after init.
+- The probe child is a plain `subprocess` running the interpreter, not a
+  `multiprocessing` child: the job service's workers are daemonic multiprocessing
+  processes, which may not start multiprocessing children of their own.
+- A backend whose driver library cannot even be found is unavailable without a probe
+  (importing Taichi in a child costs seconds).
 - Kernels may only be launched from the thread that called `ti.init`.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import io
-import multiprocessing as mp
 import os
+import subprocess
+import sys
 import threading
 from dataclasses import dataclass
 
@@ -45,29 +52,42 @@ def default_threads() -> int:
         return os.cpu_count() or 1
 
 
-def _probe_child(arch_name: str, q: mp.Queue) -> None:  # pragma: no cover - runs in a child
-    import taichi as ti
+# Run by the probe child: exit 0 only when Taichi started on exactly this arch (no silent
+# CPU fallback). Output is discarded; a crash is just a non-zero exit.
+_PROBE = """
+import sys
+import taichi as ti
+ti.init(arch=getattr(ti, sys.argv[1]), enable_fallback=False, log_level=ti.ERROR)
+sys.exit(0 if ti.lang.impl.current_cfg().arch.name == sys.argv[1] else 1)
+"""
+# The driver library each GPU backend loads; without it Taichi cannot start there.
+_DRIVER_LIBS = {"cuda": ("libcuda.so.1", "libcuda.so"), "vulkan": ("libvulkan.so.1",
+                                                                  "libvulkan.so")}
 
-    try:
-        ti.init(arch=getattr(ti, arch_name), enable_fallback=False, log_level=ti.ERROR)
-        q.put(ti.lang.impl.current_cfg().arch.name == arch_name)  # no silent CPU fallback
-    except Exception:
-        q.put(False)
+
+def _driver_present(arch_name: str) -> bool:
+    """Whether the backend's driver library loads in this process (cheap, never crashes)."""
+    for name in _DRIVER_LIBS.get(arch_name, ()):
+        try:
+            ctypes.CDLL(name)
+            return True
+        except OSError:
+            continue
+    return False
 
 
 def gpu_available(arch_name: str, timeout: float = 60.0) -> bool:
-    """Whether `arch_name` initialises in a fresh spawned process (a crash there is safe)."""
+    """Whether `arch_name` initialises in a fresh child process (a crash there is safe)."""
     if arch_name not in _probe_cache:
-        ctx = mp.get_context("spawn")
-        q: mp.Queue = ctx.Queue()
-        p = ctx.Process(target=_probe_child, args=(arch_name, q), daemon=True)
-        p.start()
-        p.join(timeout)
         ok = False
-        if p.exitcode == 0 and not q.empty():
-            ok = bool(q.get())
-        if p.is_alive():
-            p.kill()
+        if _driver_present(arch_name):
+            try:
+                done = subprocess.run([sys.executable, "-c", _PROBE, arch_name],
+                                      stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.DEVNULL, timeout=timeout, check=False)
+                ok = done.returncode == 0
+            except (OSError, subprocess.TimeoutExpired):
+                ok = False
         _probe_cache[arch_name] = ok
     return _probe_cache[arch_name]
 

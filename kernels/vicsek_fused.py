@@ -41,8 +41,9 @@ TWO_PI = 2 * np.pi
 # Per-replica parameter slots: prm (f64) and iprm (i32).
 R2, V0DT, ETA, G, L, THETA0, RADIUS = range(7)
 N_PRM = 8
-STEPS, EVERY, TRACK, NOBS, BAD, LINKED, LONGEST, OPEN, CAUSE, MOVE_NEW = range(10)
-N_IPRM = 10
+(STEPS, EVERY, TRACK, NOBS, BAD, LINKED, LONGEST, OPEN, CAUSE, MOVE_NEW, WANT_COMPONENTS,
+ WANT_SPREAD) = range(12)
+N_IPRM = 12
 # Why a replica stopped (iprm[CAUSE]), as the per-step path words it.
 CAUSES = (
     ("heading/position",
@@ -85,51 +86,69 @@ def advance_kernel(rule: int, periodic: bool):
     vicsek = rule == RULES["vicsek"]
 
     @ti.func
-    def build_cells(a0, n, c0, cap, Lb, r, pos: ti.template(), cell: ti.template(),
-                    cstart: ti.template(), cidx: ti.template()):
+    def load(k, i, pos: ti.template(), ew: ti.template(), theta: ti.template(),
+             ps: ti.template(), parent: ti.template()):
+        """Agent i's state X(s) into slot k of ps: (x, y, e_x, e_y), or (x, y, theta, 0)
+        for the JLM rules; and i as its own root of the components."""
+        ps[k, 0] = pos[i, 0]
+        ps[k, 1] = pos[i, 1]
+        if ti.static(vicsek):
+            ps[k, 2] = ew[i, 0]
+            ps[k, 3] = ew[i, 1]
+        else:
+            ps[k, 2] = theta[i]
+            ps[k, 3] = 0.0
+        parent[i] = i
+
+    @ti.func
+    def build_cells(a0, n, c0, cap, Lb, r, pos: ti.template(), ew: ti.template(),
+                    theta: ti.template(), ps: ti.template(), cell: ti.template(),
+                    cstart: ti.template(), cidx: ti.template(), parent: ti.template()):
         """Cell list of the replica's agents: cidx[a0 + k] is the agent in slot k, slots in
         cell order and, within a cell, in id order (a stable counting sort), and cell c
-        holds slots cstart[c0 + c] .. cstart[c0 + c + 1]. Returns the cells across
-        (nx, ny); nx = 0: no grid, visit all pairs."""
+        holds slots cstart[c0 + c] .. cstart[c0 + c + 1]; X(s) is copied into ps in slot
+        order on the way (the visit reads only ps). Returns the cells across (nx, ny);
+        nx = 0: no grid, visit all pairs."""
         nx = 0
         ny = 0
         w = r * _WIDEN
         ox = 0.0
         oy = 0.0
-        if n > ALL_PAIRS_N:
-            if ti.static(periodic):
+        if ti.static(periodic):
+            if n > ALL_PAIRS_N:
                 nc = ti.min(ti.cast(ti.floor(Lb / w), ti.i32), ti.cast(ti.sqrt(cap), ti.i32))
                 if nc >= 3:  # fewer: the 3x3 block would meet a cell twice
                     nx = nc
                     ny = nc
                     w = Lb / nc
-            else:
-                lo = ti.math.vec2(ti.math.inf)
-                hi = ti.math.vec2(-ti.math.inf)
-                for i in range(a0, a0 + n):
-                    p = ti.math.vec2(pos[i, 0], pos[i, 1])
-                    lo = ti.min(lo, p)
-                    hi = ti.max(hi, p)
-                ext = hi - lo
-                if not (ti.max(ext[0], ext[1]) < MAX_CELLS_ACROSS * w):  # NaN included
-                    nx = -1  # runaway: the caller stops the replica
+        else:
+            lo = ti.math.vec2(ti.math.inf)
+            hi = ti.math.vec2(-ti.math.inf)
+            for i in range(a0, a0 + n):
+                p = ti.math.vec2(pos[i, 0], pos[i, 1])
+                lo = ti.min(lo, p)
+                hi = ti.max(hi, p)
+            ext = hi - lo
+            if not (ti.max(ext[0], ext[1]) < MAX_CELLS_ACROSS * w):  # NaN included
+                nx = -1  # runaway (checked at every N): the caller stops the replica
+            elif n > ALL_PAIRS_N:
                 # Widen the cells until the grid fits the replica's cell budget (a swarm
                 # spread over 10^6 radii then shares a few large cells: slower, never wrong).
-                if nx == 0:
-                    while (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
-                        w *= 2.0
-                    nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
-                    ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
-                    ox = lo[0]
-                    oy = lo[1]
-                    if nx < 3 and ny < 3:
-                        nx = 0
+                while (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
+                    w *= 2.0
+                nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
+                ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
+                ox = lo[0]
+                oy = lo[1]
+                if nx < 3 and ny < 3:
+                    nx = 0
         if nx > 0:
             for c in range(c0, c0 + nx * ny + 1):
                 cstart[c] = 0
+            inv = 1.0 / w
             for i in range(a0, a0 + n):
-                cx = ti.min(ti.cast(ti.floor((pos[i, 0] - ox) / w), ti.i32), nx - 1)
-                cy = ti.min(ti.cast(ti.floor((pos[i, 1] - oy) / w), ti.i32), ny - 1)
+                cx = ti.min(ti.cast(ti.floor((pos[i, 0] - ox) * inv), ti.i32), nx - 1)
+                cy = ti.min(ti.cast(ti.floor((pos[i, 1] - oy) * inv), ti.i32), ny - 1)
                 cc = ti.max(cx, 0) + nx * ti.max(cy, 0)
                 cell[i] = cc
                 cstart[c0 + cc + 1] += 1
@@ -139,14 +158,16 @@ def advance_kernel(rule: int, periodic: bool):
                 slot = c0 + cell[i]
                 k = cstart[slot]
                 cidx[a0 + k] = i
+                load(a0 + k, i, pos, ew, theta, ps, parent)
                 cstart[slot] = k + 1
             for m in range(nx * ny):  # shift back: start[c] = end[c - 1], from the top
                 c = c0 + nx * ny - m
                 cstart[c] = cstart[c - 1]
             cstart[c0] = 0
         elif nx == 0:
-            for k in range(n):
-                cidx[a0 + k] = a0 + k
+            for k in range(a0, a0 + n):
+                cidx[k] = k
+                load(k, k, pos, ew, theta, ps, parent)
         return ti.math.ivec2(nx, ny)
 
     @ti.func
@@ -185,9 +206,8 @@ def advance_kernel(rule: int, periodic: bool):
              cell: ti.template(), cstart: ti.template(), cidx: ti.template(),
              parent: ti.template(), parent_u: ti.template()):
         """(sum of the terms, 0, count) over slot k's closed neighbourhood: every slot
-        (minimum image) without a grid, else the 3x3 block of cells around it, read as
-        three contiguous rows of slots away from the seams; periodic images are shifted
-        by +-L per cell or row, never tested per pair."""
+        (minimum image) without a grid, else the 3x3 block of cells around it; periodic
+        images are shifted by +-L per run of slots, never tested per pair."""
         a = ti.math.vec3(0.0)
         if nx == 0:
             for m in range(a0, a0 + n):
@@ -199,7 +219,21 @@ def advance_kernel(rule: int, periodic: bool):
             cc = cell[cidx[k]]
             cx = cc % nx
             cy = cc // nx
-            for dy in ti.static(range(-1, 2)):
+            # Each row of the 3x3 block is one contiguous run of slots (cells cx-1 .. cx+1,
+            # clipped to the row) plus, across a periodic seam, the wrapped cell's run,
+            # shifted by -+L. A runtime loop over the rows keeps the inlined code small:
+            # Taichi re-reads a kernel's Python AST at every process start.
+            lo_c = ti.max(cx - 1, 0)
+            hi_c = ti.min(cx + 1, nx - 1)
+            wc = 0
+            sx = 0.0
+            wrapped = 0
+            if ti.static(periodic):
+                if cx == 0:
+                    wc, sx, wrapped = nx - 1, -Lb, 1
+                elif cx == nx - 1:
+                    wc, sx, wrapped = 0, Lb, 1
+            for dy in range(-1, 2):
                 qy = cy + dy
                 sy = 0.0
                 row_ok = 1
@@ -214,28 +248,11 @@ def advance_kernel(rule: int, periodic: bool):
                     row_ok = ti.cast(qy >= 0 and qy < ny, ti.i32)
                 if row_ok:
                     row = c0 + nx * qy
-                    if cx >= 1 and cx + 1 < nx:  # three cells, contiguous slots: one run
-                        a = run(k, a0 + cstart[row + cx - 1], a0 + cstart[row + cx + 2],
-                                0.0, sy, a, r2, links, ps, cidx, parent, parent_u, graph,
-                                track)
-                    else:  # at a seam or an edge: cell by cell
-                        for dx in ti.static(range(-1, 2)):
-                            qx = cx + dx
-                            sx = 0.0
-                            ok = 1
-                            if ti.static(periodic):
-                                if qx < 0:
-                                    qx += nx
-                                    sx = -Lb
-                                elif qx >= nx:
-                                    qx -= nx
-                                    sx = Lb
-                            else:
-                                ok = ti.cast(qx >= 0 and qx < nx, ti.i32)
-                            if ok:
-                                a = run(k, a0 + cstart[row + qx], a0 + cstart[row + qx + 1],
-                                        sx, sy, a, r2, links, ps, cidx, parent, parent_u,
-                                        graph, track)
+                    a = run(k, a0 + cstart[row + lo_c], a0 + cstart[row + hi_c + 1], 0.0, sy,
+                            a, r2, links, ps, cidx, parent, parent_u, graph, track)
+                    if wrapped:
+                        a = run(k, a0 + cstart[row + wc], a0 + cstart[row + wc + 1], sx, sy,
+                                a, r2, links, ps, cidx, parent, parent_u, graph, track)
         return a
 
     @ti.func
@@ -291,7 +308,9 @@ def advance_kernel(rule: int, periodic: bool):
         obs[row, 0] = s
         obs[row, 1] = ti.sqrt(sx * sx + sy * sy) / n
         spread = 0.0
-        if ti.static(vicsek):
+        if iprm[b, WANT_SPREAD] == 0:
+            spread = ti.math.nan  # not asked for (recording.observables)
+        elif ti.static(vicsek):
             spread = circular_spread(a0, n, ps, arc_lo, arc_hi)
         else:
             lo = ti.math.inf
@@ -408,24 +427,14 @@ def advance_kernel(rule: int, periodic: bool):
                 track = iprm[b, TRACK] != 0
                 s = s0
                 while s < s1 and s <= steps and iprm[b, BAD] < 0:
-                    graph = s % every == 0 or s == steps  # an observation step
-                    nxy = build_cells(a0, n, c0, cap, Lb, prm[b, RADIUS], pos, cell,
-                                      cstart, cidx)
+                    observing = s % every == 0 or s == steps
+                    graph = observing and iprm[b, WANT_COMPONENTS] != 0
+                    nxy = build_cells(a0, n, c0, cap, Lb, prm[b, RADIUS], pos, ew, theta,
+                                      ps, cell, cstart, cidx, parent)
                     if nxy[0] < 0:
                         iprm[b, BAD] = s
                         iprm[b, CAUSE] = 1
                         break
-                    for k in range(a0, a0 + n):  # X(s) in slot order: the visit reads it
-                        i = cidx[k]
-                        ps[k, 0] = pos[i, 0]
-                        ps[k, 1] = pos[i, 1]
-                        if ti.static(vicsek):
-                            ps[k, 2] = ew[i, 0]
-                            ps[k, 3] = ew[i, 1]
-                        else:
-                            ps[k, 2] = theta[i]
-                            ps[k, 3] = 0.0
-                        parent[i] = i
                     nx = nxy[0]
                     ny = nxy[1]
                     tracking = track and s < steps
@@ -445,7 +454,7 @@ def advance_kernel(rule: int, periodic: bool):
                         if s < steps:
                             bad |= update(b, i, k, s, a0, acc, Lb, prm, iprm, kseed, ps, pos,
                                           ew, theta)
-                    if graph:
+                    if observing:
                         row = ooff[b] + iprm[b, NOBS]
                         iprm[b, NOBS] += 1
                         observe(b, a0, n, s, row, ps, parent, deg, arc_lo, arc_hi, prm, iprm,
@@ -497,9 +506,11 @@ class VicsekBatch:
             track = p.track_linked_intervals
             track = sc.n_agents <= 100_000 if track is None else track
             self.track.append(track)
-            iprm[b, [STEPS, EVERY, TRACK, BAD, MOVE_NEW]] = [
+            chosen = set(sc.recording.observables or OBS)
+            iprm[b, [STEPS, EVERY, TRACK, BAD, MOVE_NEW, WANT_COMPONENTS, WANT_SPREAD]] = [
                 sc.time.steps, sc.recording.observables_every, int(track), -1,
-                int(p.position_update == "new_heading")]
+                int(p.position_update == "new_heading"), int("components" in chosen),
+                int("heading_spread" in chosen)]
             kseed[b] = rng.seed_key(sc.seed, 0)
             init = initial_state(sc)
             th = init.headings
@@ -558,6 +569,9 @@ class VicsekBatch:
             keep.remove("leader_error")
         if not self.track[b]:
             keep.remove("linked_intervals")
+        chosen = self.scenarios[b].recording.observables
+        if chosen is not None:
+            keep = [c for c in keep if c in chosen]
         return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
 
     def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:

@@ -25,6 +25,9 @@ class ModelParams(Strict):
     paper_inclusive: ClassVar[bool] = True
     # Per-agent state the model has, a subset of ("position", "velocity", "heading").
     state_arrays: ClassVar[tuple[str, ...]] = ("position",)
+    # The observables the model reports, when it declares them (then a scenario may
+    # choose among them with recording.observables); None: not declared.
+    observables: ClassVar[tuple[str, ...] | None] = None
 
     def check_scenario(self, scenario: Scenario) -> None:
         """Cross-block checks (raise ValueError with a user-facing message)."""
@@ -65,6 +68,7 @@ def describe_models() -> list[dict[str, Any]]:
                 "equations": cls.equations,
                 "paper_inclusive": cls.paper_inclusive,
                 "state": list(cls.state_arrays),
+                "observables": None if cls.observables is None else list(cls.observables),
                 "parameters": params,
                 "json_schema": cls.model_json_schema(),
             }

@@ -171,6 +171,14 @@ class Recording(Strict):
     observables_every: PositiveInt = Field(
         default=1, description="Evaluate the observables every k steps (and at the end)."
     )
+    observables: list[str] | None = Field(
+        default=None, max_length=100,
+        description="The observables to evaluate, by the names the model reports (see "
+        "`flocklab models`); null: all of them. Naming only cheap ones is faster: on the "
+        "small-N path the Vicsek family skips the graph observables (components, "
+        "degree_*, isolated) and the heading spread unless they are named. Supported by "
+        "the models that declare their observables (vicsek).",
+    )
 
     @property
     def enabled(self) -> bool:

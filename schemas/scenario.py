@@ -100,6 +100,18 @@ class Scenario(Strict):
                     f"neighbours.radius = {self.neighbours.radius:g} exceeds L/2 = "
                     f"{self.space.L / 2:g}: the minimum image would be ambiguous"
                 )
+        chosen = self.recording.observables
+        if chosen is not None:
+            known = type(self.model).observables
+            if known is None:
+                raise ValueError(
+                    f"recording.observables: model {self.model.kind} does not declare its "
+                    "observables; leave it null (all are evaluated)")
+            unknown = sorted(set(chosen) - set(known))
+            if unknown:
+                raise ValueError(
+                    f"recording.observables: {', '.join(unknown)} not reported by model "
+                    f"{self.model.kind}; it reports {', '.join(known)}")
         try:
             self.model.check_scenario(self)
         except ValueError as exc:

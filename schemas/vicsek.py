@@ -11,9 +11,9 @@ xi_i is uniform in [-eta/2, eta/2] (optional for the JLM rules, whose theorems a
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar, Literal
+from typing import TYPE_CHECKING, Annotated, ClassVar, Literal
 
-from pydantic import Field, StrictBool
+from pydantic import Field, StrictBool, StrictFloat
 
 from .base import NonNegativeReal, PositiveReal, Real
 from .catalog import ModelParams, register_model
@@ -36,13 +36,18 @@ class VicsekParams(ModelParams):
     summary: ClassVar[str] = "Constant-speed agents aligning headings with their neighbours."
     paper_inclusive: ClassVar[bool] = True
     state_arrays: ClassVar[tuple[str, ...]] = ("position", "heading")
+    observables: ClassVar[tuple[str, ...] | None] = (
+        "polarization", "heading_spread", "leader_error", "components", "degree_mean",
+        "degree_min", "degree_max", "isolated", "linked_intervals")
 
     kind: Literal["vicsek"] = "vicsek"
     rule: Rule = Field(default="vicsek", description="Heading update rule.")
     v0: NonNegativeReal = Field(default=0.03, description="Common speed (length per time).")
-    eta: NonNegativeReal = Field(
+    # Its own bounds, not NonNegativeReal's: pydantic keeps the last `le` of the merged
+    # metadata, so a field `le` beside the type's 1e300 bound was silently dropped.
+    eta: Annotated[float, Field(ge=0, le=6.283185307179586 + 1e-12, allow_inf_nan=False),
+                   StrictFloat] = Field(
         default=0.0,
-        le=6.283185307179586 + 1e-12,
         description="Noise amplitude: xi uniform in [-eta/2, eta/2] (radians), per agent "
         "and step. 0 for the JLM theorems.",
     )

@@ -357,6 +357,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("presets", help="list the paper presets, or print one as JSON")
     p.add_argument("name", nargs="?", help="a preset to print")
     p.set_defaults(fn=cmd_presets)
+    p = sub.add_parser("render", help="draw a run (snapshot, observables, movie) or a sweep")
+    from .render.cli import add_arguments, cmd_render
+
+    add_arguments(p)
+    p.set_defaults(fn=cmd_render)
     p = sub.add_parser("serve", help="start the HTTP job service (see `serve --help`)",
                        add_help=False)
     p.set_defaults(fn=None)

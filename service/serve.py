@@ -12,6 +12,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import FrameType
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -39,7 +40,14 @@ def cli_main(argv: list[str]) -> int:
     import uvicorn
 
     from service.app import create_app, load_settings
-    from service.jobs import DataDirLocked
+    from service.app.connections import (
+        ConnectionLimits,
+        connection_cap,
+        guarded_protocol,
+        quiet_noisy_loggers,
+        raise_fd_limit,
+    )
+    from service.jobs import data_dir_locked
 
     overrides = {k: v for k, v in (("data_dir", args.data_dir), ("workers", args.workers),
                                    ("executor", args.executor),
@@ -52,13 +60,41 @@ def cli_main(argv: list[str]) -> int:
         return 2
     logging.basicConfig(level=args.log_level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    quiet_noisy_loggers()
+    cap = connection_cap(settings.max_connections, raise_fd_limit())
+    if cap < settings.max_connections:
+        logging.getLogger("flocklab.connections").warning(
+            "max_connections lowered from %d to %d to stay under the open-file limit",
+            settings.max_connections, cap)
     app = create_app(settings)
+    protocol = guarded_protocol(ConnectionLimits(
+        header_timeout=settings.header_timeout_seconds,
+        body_timeout=settings.body_timeout_seconds, max_connections=cap))
+    config = uvicorn.Config(app, host=args.host, port=args.port, log_level=args.log_level,
+                            proxy_headers=False, server_header=False, http=protocol,
+                            timeout_keep_alive=settings.keep_alive_seconds,
+                            timeout_graceful_shutdown=10, lifespan="on")
+
+    class Server(uvicorn.Server):
+        """uvicorn's server, which on SIGTERM/SIGINT also releases long-polls and event
+        streams at once, so shutdown does not wait out the grace period for them."""
+
+        def handle_exit(self, sig: int, frame: FrameType | None) -> None:
+            hub = getattr(app.state, "hub", None)
+            if hub is not None:
+                hub.close_threadsafe()
+            super().handle_exit(sig, frame)
+
     try:
-        uvicorn.run(app, host=args.host, port=args.port, log_level=args.log_level,
-                    proxy_headers=False, server_header=False, timeout_graceful_shutdown=10)
-    except DataDirLocked as exc:
-        print(f"flocklab serve: {exc}", file=sys.stderr)
-        return 1
+        Server(config).run()
+    except SystemExit:
+        # uvicorn exits 3 when the lifespan fails; the documented exit for a data
+        # directory another service holds is 1.
+        if data_dir_locked(settings.data_dir):
+            print(f"flocklab serve: another flocklab service is using {settings.data_dir}",
+                  file=sys.stderr)
+            return 1
+        raise
     return 0
 
 

@@ -11,3 +11,16 @@ def taichi_cpu():
     from kernels import runtime
 
     return runtime.ensure("cpu")
+
+
+@pytest.fixture
+def fixed_windows(monkeypatch):
+    """Make the fused driver's windows a fixed number of agent-steps (instead of ~0.1 s
+    of work), so a test can cut a run at known steps."""
+    from kernels import batch
+
+    def fix(agent_steps: int) -> None:
+        monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", agent_steps)
+        monkeypatch.setattr(batch, "WINDOW_SECONDS", None)
+
+    return fix

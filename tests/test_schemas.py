@@ -1,6 +1,7 @@
 """The scenario contract: strict, complete error reports, canonical round trip."""
 
 import json
+import math
 
 import pytest
 from pydantic import ValidationError
@@ -118,9 +119,10 @@ def test_embedded_default_is_the_example():
 
 
 def test_schema_and_kernel_registries_agree():
+    from kernels.model import MODULES
     from kernels.models import KERNELS
 
-    assert set(MODELS) == set(KERNELS)
+    assert set(MODELS) == set(KERNELS) == set(MODULES)
 
 
 def test_every_model_runs_reproducibly_on_every_available_backend(taichi_cpu):
@@ -181,3 +183,13 @@ def test_jittered_lattice_start_keeps_agents_apart():
     assert "inside the periodic box" in errors(too_big)["(root)"]
     assert "jitter" in str(errors(with_("initial", {"kind": "random", "N": 4, "region": {
         "kind": "lattice", "spacing": 0.5, "jitter": 0.5}})))
+
+
+def test_vicsek_noise_above_two_pi_is_refused():
+    from pydantic import ValidationError
+
+    from schemas.vicsek import VicsekParams
+
+    assert VicsekParams.model_validate({"eta": 2 * math.pi}).eta == 2 * math.pi
+    with pytest.raises(ValidationError, match=r"less than or equal to 6\.28"):
+        VicsekParams.model_validate({"eta": 9.0})

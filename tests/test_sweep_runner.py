@@ -124,7 +124,11 @@ def test_table_equals_a_hand_loop_over_flocklab_run(tmp_path, capsys, taichi_cpu
     assert pandas.read_csv(tmp_path / "sweep" / "runs.csv").shape == (8, 8 + len(MEASURES))
 
 
-def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path, taichi_cpu):
+def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path, taichi_cpu,
+                                                                  monkeypatch):
+    # One run per engine call, so a stop can land between runs (the engine batches the
+    # runs it is given into one launch, and they all finish together).
+    monkeypatch.setattr("service.sweeps.executors.BATCH_RUNS", 1)
     sweep = small_sweep(measure={"va": MEASURES["va"]}, replicas=1)
     out = tmp_path / "resumed"
     seen = []

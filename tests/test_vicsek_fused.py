@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import kernels
-from kernels import batch, engine
+from kernels import engine
 from tests.test_vicsek import Frames, scenario
 
 # A mix a sweep would batch together: different N, L, noise, steps and seeds.
@@ -42,22 +42,22 @@ def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, rule, L):
         same_result(res, kernels.run(sc))
 
 
-def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, monkeypatch):
+def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, fixed_windows):
     sc = scenario(N=200, L=8.0, eta=1.5, steps=60, every=0)
     whole = kernels.run(sc)
     sink = Frames()
     framed = kernels.run(scenario(N=200, L=8.0, eta=1.5, steps=60, every=7), sink=sink)
     assert sink.steps == [*range(0, 60, 7), 60]
-    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", 200 * 3)  # windows of 3 steps
+    fixed_windows(200 * 3)  # windows of 3 steps
     cut = kernels.run(sc)
     same_result(whole, framed)
     same_result(whole, cut)
 
 
-def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, monkeypatch):
+def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, fixed_windows):
     sc = scenario(N=100, L=6.0, eta=1.0, steps=50, every=0)
     whole = kernels.run(sc)
-    monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", 100 * 10)  # windows of 10 steps
+    fixed_windows(100 * 10)  # windows of 10 steps
     polls = iter([False, True])
     part = kernels.run(sc, should_stop=lambda: next(polls))
     assert part.status == "cancelled" and part.steps == 20
@@ -84,3 +84,28 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     assert engine.fused_batch(small, "cuda") is None  # a GPU wants parallel agents
     groups = engine._batches([small, large, small])
     assert sorted(map(sorted, groups)) == [[0, 2], [1]]
+
+
+@pytest.mark.parametrize("per_step", [False, True], ids=["fused", "per_step"])
+def test_chosen_observables_are_the_same_numbers(taichi_cpu, monkeypatch, per_step):
+    if per_step:
+        monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+    full = kernels.run(scenario(N=150, L=7.0, eta=1.0, steps=30, every=0))
+    sc = scenario(N=150, L=7.0, eta=1.0, steps=30, every=0)
+    sc = sc.model_copy(update={"recording": sc.recording.model_copy(
+        update={"observables": ["polarization", "degree_mean"]})})
+    part = kernels.run(sc)
+    assert list(part.observables) == ["step", "time", "polarization", "degree_mean"]
+    for k in part.observables:
+        assert np.array_equal(part.observables[k], full.observables[k]), k
+
+
+def test_unknown_or_undeclared_observables_are_refused():
+    from pydantic import ValidationError
+
+    from schemas import Scenario
+
+    doc = scenario(N=20, L=5.0).model_dump(mode="json")
+    doc["recording"]["observables"] = ["polarization", "energy"]
+    with pytest.raises(ValidationError, match="energy not reported by model vicsek"):
+        Scenario.model_validate(doc)

@@ -3,6 +3,10 @@
 Long-polls (`GET /v1/jobs/{id}?wait=`) and Server-Sent Events wait on an asyncio.Event
 that the supervisor sets (through the event loop) whenever it changes that job, instead
 of polling the store.
+
+On shutdown (SIGTERM) `close` wakes every waiter at once: a long-poll answers the job as
+it is and a stream ends, so the server need not wait out its grace period for them (and
+then cancel them into 500s).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ class ChangeHub:
     def __init__(self, loop: asyncio.AbstractEventLoop):
         self._loop = loop
         self._waiters: defaultdict[str, set[asyncio.Event]] = defaultdict(set)
+        self.closing = False
 
     def publish_threadsafe(self, job_id: str) -> None:
         """Called from the supervisor thread."""
@@ -33,11 +38,24 @@ class ChangeHub:
         for event in self._waiters.get(job_id, ()):
             event.set()
 
+    def close_threadsafe(self) -> None:
+        """The server is shutting down: release every waiter, now and from now on."""
+        with contextlib.suppress(RuntimeError):
+            self._loop.call_soon_threadsafe(self._close)
+
+    def _close(self) -> None:
+        self.closing = True
+        for events in self._waiters.values():
+            for event in events:
+                event.set()
+
     @contextmanager
     def subscribe(self, job_id: str) -> Iterator[asyncio.Event]:
         """An event set on every change of the job while the block runs. Subscribe before
         reading the job's state, so no change falls between the read and the wait."""
         event = asyncio.Event()
+        if self.closing:
+            event.set()
         self._waiters[job_id].add(event)
         try:
             yield event

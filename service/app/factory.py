@@ -19,13 +19,15 @@ from schemas import Problem, Scenario
 from schemas.sweep import Sweep
 from service.jobs import JobRuntime
 
+from .admission import AdmissionMiddleware
 from .auth import require_api_key
 from .body_limit import BodyLimitMiddleware
 from .events import ChangeHub
-from .problems import PROBLEM_MEDIA_TYPE, install_problem_handlers
-from .routers import catalog, health, jobs, results, sweeps
+from .problems import PROBLEM_MEDIA_TYPE, UnexpectedErrorMiddleware, install_problem_handlers
+from .routers import catalog, health, jobs, render, results, sweeps
 from .settings import Settings, load_settings
 from .sweep_wire import SweepRequest
+from .viewer import install as install_viewer
 from .wire import JobRequest
 
 VERSION = "0.1.0"
@@ -71,16 +73,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     install_problem_handlers(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
+    # Outside the body limit: refusals by content type, disk or queue read no body.
+    app.add_middleware(AdmissionMiddleware, settings=settings)
     if settings.cors_origins:  # off unless origins are listed (R20)
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins,
                            allow_methods=["GET", "POST"],
                            allow_headers=["Authorization", "X-API-Key", "Idempotency-Key",
                                           "Content-Type"],
                            expose_headers=["Location", "Retry-After", "Idempotent-Replayed"])
+    app.add_middleware(UnexpectedErrorMiddleware)  # outermost: catches every layer's error
     app.include_router(health.router)
     auth = [Depends(require_api_key)]
-    for module in (jobs, results, sweeps, catalog):
+    for module in (jobs, results, render, sweeps, catalog):
         app.include_router(module.router, prefix="/v1", dependencies=auth)
+    app.include_router(render.sweep_router, prefix="/v1", dependencies=auth)
+    install_viewer(app)  # the browser viewer at / and offline Swagger UI assets
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     if not public_docs:
         @app.get("/openapi.json", include_in_schema=False, dependencies=auth)

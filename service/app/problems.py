@@ -1,12 +1,16 @@
 """Every error response as RFC 9457 problem details (`application/problem+json`).
 
 Handlers cover our own `ProblemError`, FastAPI's request validation (query and path
-parameters; bodies are parsed by hand), Starlette's HTTP errors (404 for unknown routes,
-405, ...) and anything unexpected (500, without internals in the body).
+parameters; bodies are parsed by hand) and Starlette's HTTP errors (404 for unknown routes,
+405, ...). Anything unexpected is caught by `UnexpectedErrorMiddleware` rather than a
+handler for `Exception`: Starlette re-raises after such a handler answered, and uvicorn
+then closes the keep-alive connection, so a pooled client's next request on it failed.
+A full disk (ENOSPC, SQLite's "database or disk is full") is a 503, not a 500.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 from http import HTTPStatus
 from typing import Any
@@ -15,9 +19,12 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.requests import ClientDisconnect
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from schemas import FieldError
 from schemas.problems import json_safe
+from service.jobs.disk import is_disk_full
 from service.jobs.problems import problem
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
@@ -77,14 +84,55 @@ async def _on_http(request: Request, exc: Exception) -> JSONResponse:
     return problem_response(body, request, dict(exc.headers) if exc.headers else None)
 
 
-async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:
-    log.exception("unhandled error on %s %s", request.method, request.url.path)
-    return problem_response(problem("internal-error", "Internal Server Error", 500,
-                                    "an unexpected error occurred; it has been logged"), request)
+DISK_FULL_RETRY_AFTER = 60
+
+
+class UnexpectedErrorMiddleware:
+    """Any exception a route did not turn into a problem: logged, answered as a problem
+    (503 for a full disk, else 500) and not re-raised, so the connection stays usable.
+    An exception after the response started is re-raised: the connection must close so
+    the client sees a truncated body rather than a complete-looking one."""
+
+    def __init__(self, app: ASGIApp):
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = False
+
+        async def tracking_send(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, receive, tracking_send)
+        except ClientDisconnect:
+            return  # the client left (or was cut off by a timeout): nobody to answer
+        except Exception as exc:
+            if started:
+                raise
+            headers: list[tuple[bytes, bytes]] = []
+            if is_disk_full(exc):
+                log.error("disk full on %s %s: %s", scope["method"], scope["path"], exc)
+                body = problem("insufficient-storage", "Out of disk space", 503,
+                               "the server's data disk is full; retry later")
+                headers.append((b"retry-after", str(DISK_FULL_RETRY_AFTER).encode()))
+            else:
+                log.exception("unhandled error on %s %s", scope["method"], scope["path"])
+                body = problem("internal-error", "Internal Server Error", 500,
+                               "an unexpected error occurred; it has been logged")
+            body["instance"] = scope["path"]
+            payload = json.dumps(body).encode()
+            await send({"type": "http.response.start", "status": body["status"], "headers": [
+                (b"content-type", PROBLEM_MEDIA_TYPE.encode()),
+                (b"content-length", str(len(payload)).encode()), *headers]})
+            await send({"type": "http.response.body", "body": payload})
 
 
 def install_problem_handlers(app: FastAPI) -> None:
     app.add_exception_handler(ProblemError, _on_problem)
     app.add_exception_handler(RequestValidationError, _on_validation)
     app.add_exception_handler(StarletteHTTPException, _on_http)
-    app.add_exception_handler(Exception, _on_unexpected)

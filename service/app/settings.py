@@ -91,11 +91,30 @@ class Settings(BaseSettings):
                              description="CPU threads (num_cpus) of a Ray task.")
     ray_max_calls: int = Field(default=20, ge=1,
                                description="Tasks a Ray worker process runs before recycling.")
+    # Hardening (docs/SERVICE_HARDENING.md).
+    min_free_disk_bytes: int = Field(
+        default=256 * MiB, ge=0, description="Free space the data disk keeps: below it, "
+        "submissions get 503 and queued jobs wait (0: no check).")
+    max_observable_rows: int = Field(
+        default=1_000_000, ge=1, description="Rows of a job's observables series "
+        "(steps / recording.observables_every) before 422.")
+    max_connections: int = Field(
+        default=1000, ge=1, description="Open connections before new ones get 503 (capped "
+        "below the open-file limit).")
+    header_timeout_seconds: float = Field(
+        default=10.0, gt=0, description="A request line and headers must arrive within this "
+        "(from the connection's start or its previous response), else 408 and close.")
+    body_timeout_seconds: float = Field(
+        default=60.0, gt=0, description="A request body must arrive within this after its "
+        "headers, else 408 and close.")
+    keep_alive_seconds: float = Field(
+        default=5.0, gt=0, description="An idle keep-alive connection is closed after this.")
 
     def limits(self) -> Limits:
         return Limits(max_agents=self.max_agents, max_steps=self.max_steps,
                       max_trajectory_bytes=self.max_trajectory_bytes,
                       max_memory_bytes=self.max_memory_bytes,
+                      max_observable_rows=self.max_observable_rows,
                       max_sweep_runs=self.max_sweep_runs,
                       max_sweep_agent_steps=self.max_sweep_agent_steps)
 
@@ -114,6 +133,7 @@ class Settings(BaseSettings):
             # With Ray the workers are drivers: Taichi runs on the cluster, never here.
             warmup_preset=(self.warmup_preset or None) if self.executor == "local" else None,
             executor=self.executor_config(),
+            min_free_bytes=self.min_free_disk_bytes,
         )
 
     def executor_config(self) -> ExecutorConfig:

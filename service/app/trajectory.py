@@ -43,6 +43,10 @@ def parse_agents(spec: str | None, n_agents: int) -> slice | np.ndarray:
     """`a:b[:s]` (a slice) or `i,j,k` (ids, any order, no repeats) or None (all agents)."""
     if spec is None or spec == "":
         return slice(None)
+    # Python refuses to parse integers of more than 4300 digits (a ValueError that was a
+    # 500); no agent index needs more than 18.
+    if re.search(r"\d{19}", spec):
+        raise _bad("agents", "agent indices must be below 10^18")
     m = re.fullmatch(r"(\d*):(\d*)(?::(\d+))?", spec)
     if m:
         start, stop, step = (int(g) if g else None for g in m.groups())

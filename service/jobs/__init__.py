@@ -5,7 +5,7 @@ imports the engine (and so Taichi).
 """
 
 from .limits import Limits, check_limits
-from .runtime import DataDirLocked, JobRuntime
+from .runtime import DataDirLocked, JobRuntime, data_dir_locked
 from .store import STATUSES, TERMINAL, IdempotencyConflict, Job, JobStore, NewJob, QueueFull
 from .supervisor import SupervisorConfig
 
@@ -22,4 +22,5 @@ __all__ = [
     "QueueFull",
     "SupervisorConfig",
     "check_limits",
+    "data_dir_locked",
 ]

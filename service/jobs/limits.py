@@ -8,6 +8,7 @@ stored by an older, laxer configuration cannot run past the current limits. Pure
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 from schemas import FieldError, Scenario
@@ -22,6 +23,10 @@ BYTES_PER_VALUE = 8
 ENGINE_BYTES_PER_AGENT = 400
 # Fixed cost of a worker with Taichi loaded and kernels compiled.
 ENGINE_BASE_BYTES = 256 * 2**20
+# An agent may move at most this many interaction radii in one step (and never more than
+# a periodic box's side): beyond that no neighbour relation survives a step and the run
+# only produces huge coordinates (v0 = 1e300 gave positions near 1e283 in a box of 7).
+MAX_STEP_RADII = 10.0
 
 
 @dataclass(frozen=True)
@@ -34,6 +39,8 @@ class Limits:
     max_steps: int
     max_trajectory_bytes: int
     max_memory_bytes: int
+    # Rows of the observables time series (CSV, /metrics): steps / observables_every.
+    max_observable_rows: int = 1_000_000
     max_sweep_runs: int = 100_000
     max_sweep_agent_steps: int = 10**12
 
@@ -59,6 +66,42 @@ def estimated_memory_bytes(scenario: Scenario) -> int:
     return ENGINE_BASE_BYTES + n * ENGINE_BYTES_PER_AGENT + frame
 
 
+def observable_rows(scenario: Scenario) -> int:
+    """Rows of the observables series: every `observables_every` steps, plus the start and
+    the end."""
+    return scenario.time.steps // scenario.recording.observables_every + 2
+
+
+def _speeds(scenario: Scenario) -> list[tuple[str, float]]:
+    """Every speed the scenario sets, with the field that sets it."""
+    out = []
+    v0 = getattr(scenario.model, "v0", None)
+    if isinstance(v0, int | float):
+        out.append(("model.v0", float(v0)))
+    if "velocity" in type(scenario.model).state_arrays:  # double integrators start moving
+        initial = scenario.initial
+        speed_range = getattr(initial, "speed_range", None)
+        if speed_range is not None:
+            out.append(("initial.speed_range", float(speed_range[1])))
+        velocities = getattr(initial, "velocities", None)
+        if velocities:
+            out.append(("initial.velocities",
+                        max(math.hypot(vx, vy) for vx, vy in velocities)))
+    return out
+
+
+def max_step_length(scenario: Scenario) -> float | None:
+    """The longest distance an agent may travel in one step: MAX_STEP_RADII radii, at most
+    the periodic box's side; None when the scenario has neither length scale."""
+    scales = []
+    if scenario.neighbours is not None:
+        scales.append(MAX_STEP_RADII * scenario.neighbours.radius)
+    side = getattr(scenario.space, "L", None)
+    if side is not None:
+        scales.append(float(side))
+    return min(scales) if scales else None
+
+
 def check_limits(scenario: Scenario, limits: Limits) -> list[FieldError]:
     """Every limit the scenario exceeds, as field errors (empty when admissible)."""
     errors = []
@@ -80,6 +123,20 @@ def check_limits(scenario: Scenario, limits: Limits) -> list[FieldError]:
     if mem > limits.max_memory_bytes:
         errors.append(_err("initial.N", f"the run needs about {_size(mem)} of memory, over "
                                         f"the limit of {_size(limits.max_memory_bytes)}"))
+    rows = observable_rows(scenario)
+    if rows > limits.max_observable_rows:
+        errors.append(_err("recording.observables_every", (
+            f"the observables would have {rows} rows (steps / observables_every), over this "
+            f"service's limit of {limits.max_observable_rows}; evaluate them less often")))
+    longest = max_step_length(scenario)
+    if longest is not None:
+        dt = scenario.time.dt
+        for loc, speed in _speeds(scenario):
+            if speed * dt > longest:
+                errors.append(FieldError(loc=loc, type="speed_too_large", msg=(
+                    f"a speed of {speed:g} moves an agent {speed * dt:g} per step (dt = "
+                    f"{dt:g}), more than {longest:g} ({MAX_STEP_RADII:g} neighbour radii, at "
+                    f"most the box side): lower the speed or dt")))
     return errors
 
 

@@ -4,6 +4,8 @@ Layout under the results root:
     <job-uuid>/                 committed results of a job (scenario.json, summary.json,
                                 observables.csv, trajectory.h5)
     .attempts/<job-uuid>.<token>/   one attempt's output, written by a worker
+    .attempts/.<job-uuid>.<token>.partial-*/   the same while the run writes it (renamed
+                                the attempt folder when complete; left behind by a kill)
 A sweep's committed folder holds the sweep runner's output instead (sweep.json, runs.csv,
 table.csv, series.csv, runs/<i>/). A sweep's attempt folder outlives a lost attempt: the
 next attempt adopts it and the runner skips the runs already finished there.
@@ -78,7 +80,12 @@ class ResultStore:
         return True
 
     def discard_attempt(self, job_id: str, token: str) -> None:
-        shutil.rmtree(self.attempt_dir(job_id, token), ignore_errors=True)
+        """Delete an attempt's output, finished or not: a killed run leaves its hidden
+        `.partial-*` (or `.old-*`) sibling, which would otherwise fill the disk."""
+        final = self.attempt_dir(job_id, token)
+        shutil.rmtree(final, ignore_errors=True)
+        for leftover in self.attempts.glob(f".{final.name}.*"):
+            shutil.rmtree(leftover, ignore_errors=True)
 
     def delete(self, job_id: str) -> None:
         shutil.rmtree(self.job_dir(job_id), ignore_errors=True)

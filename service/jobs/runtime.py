@@ -50,6 +50,19 @@ class JobRuntime:
         os.close(self._lock_fd)
 
 
+def data_dir_locked(data_dir: Path) -> bool:
+    """Whether a live service holds `data_dir`'s lock (probed without keeping it)."""
+    path = data_dir / "service.lock"
+    if not path.exists():
+        return False
+    try:
+        fd = _lock(path)
+    except DataDirLocked:
+        return True
+    os.close(fd)
+    return False
+
+
 def _lock(path: Path) -> int:
     fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     try:

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from ..sweeps.executors import ExecutorConfig
+from .disk import free_bytes
 from .limits import Limits
 from .problems import problem
 from .results import ResultStore
@@ -42,6 +43,8 @@ log = logging.getLogger("flocklab.supervisor")
 TICK_SECONDS = 0.25
 PROGRESS_WRITE_INTERVAL = 0.25
 REAP_INTERVAL = 1.0
+# How often a job held back by a full disk is reported in the log.
+DISK_LOG_INTERVAL = 60.0
 
 
 @dataclass(frozen=True)
@@ -57,6 +60,8 @@ class SupervisorConfig:
     worker_max_rss_bytes: int = 0
     warmup_preset: str | None = None
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+    # Jobs wait in the queue while the results disk has less free space than this.
+    min_free_bytes: int = 0
 
 
 @dataclass
@@ -107,7 +112,7 @@ class Supervisor:
                                         daemon=True)
         self._spawn_after = 0.0
         self._spawn_backoff = 0.0
-        self._last = {"heartbeat": 0.0, "reap": 0.0, "expire": 0.0}
+        self._last = {"heartbeat": 0.0, "reap": 0.0, "expire": 0.0, "disk_log": -1e9}
 
     # -- the API side (thread-safe) -------------------------------------------------------
 
@@ -293,10 +298,26 @@ class Supervisor:
 
     # -- jobs -----------------------------------------------------------------------------
 
+    def _disk_has_room(self) -> bool:
+        """Whether a job may start: the results disk keeps the configured reserve free."""
+        if self.config.min_free_bytes <= 0:
+            return True
+        free = free_bytes(self.results.root)
+        if free >= self.config.min_free_bytes:
+            return True
+        now = time.monotonic()
+        if now - self._last["disk_log"] >= DISK_LOG_INTERVAL:
+            self._last["disk_log"] = now
+            log.warning("%d bytes free on the results disk, under the reserve of %d: queued "
+                        "jobs wait", free, self.config.min_free_bytes)
+        return False
+
     def _dispatch(self) -> None:
-        for w in self._workers:
-            if not w.ready or w.retiring or w.attempt is not None:
-                continue
+        idle = [w for w in self._workers
+                if w.ready and not w.retiring and w.attempt is None]
+        if not idle or not self._disk_has_room():
+            return
+        for w in idle:
             job = self.store.claim_next(self.owner, self.config.lease_seconds)
             if job is None:
                 return
@@ -436,6 +457,10 @@ class Supervisor:
                 w.process.kill()
                 w.process.join(1.0)
             w.conn.close()
+            if w.attempt is not None and w.attempt.kind != "sweep":
+                # The killed run's partial output: the job re-runs from scratch (a sweep
+                # keeps its folder, which its next attempt adopts to skip finished runs).
+                self.results.discard_attempt(w.attempt.job_id, w.attempt.token)
         self._workers.clear()
 
 

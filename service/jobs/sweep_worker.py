@@ -16,6 +16,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from .disk import disk_full_problem, is_disk_full, scrub_paths
 from .limits import Limits
 from .problems import problem
 from .results import SWEEP_FILES, checksums
@@ -78,8 +79,11 @@ def run_sweep_order(order: dict[str, Any], conn: Connection,
                                    errors=[e.model_dump() for e in exc.errors])}
     except Exception as exc:  # a runner bug must fail this sweep, not the worker
         log.error("sweep %s failed:\n%s", order["job_id"], traceback.format_exc())
+        if is_disk_full(exc):
+            return {"problem": disk_full_problem("while the sweep wrote its results")}
+        # The message may name files under the data directory: clients never see paths.
         return {"problem": problem("internal-error", "Internal error", 500,
-                                   f"{type(exc).__name__}: {exc}")}
+                                   scrub_paths(f"{type(exc).__name__}: {exc}"))}
     summary = {"status": outcome.status, "runs_done": outcome.runs_done,
                "runs_failed": outcome.runs_failed, "runs_total": outcome.runs_total,
                "runs_ended": outcome.runs_done + outcome.runs_failed,

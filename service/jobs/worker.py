@@ -28,6 +28,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from .disk import disk_full_problem, is_disk_full, scrub_paths
 from .limits import Limits, check_limits
 from .problems import problem
 from .results import checksums
@@ -101,23 +102,38 @@ def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dic
 
     executor = make_executor(order.get("executor"))
     on_ray = (order.get("executor") or {}).get("kind") == "ray"
-    if scenario.threads is None and order.get("threads") and not on_ray:
-        # Thread count = the CPUs this worker is allotted (R13); the user's choice wins.
-        # (A Ray task gets its own: the CPUs it reserved on the cluster.)
-        scenario = scenario.model_copy(update={"threads": order["threads"]})
+    # A Ray task gets its own threads: the CPUs it reserved on the cluster.
+    scenario, notes = _fit_threads(scenario, None if on_ray else order.get("threads"))
     out_dir = Path(order["out_dir"])
     try:
         summary = executor.run_job(scenario, out_dir, on_progress=on_progress,
                                    should_stop=should_stop)
     except BackendUnavailable as exc:
-        return {"problem": problem("backend-unavailable", "Backend unavailable", 503, str(exc),
-                                   backend=scenario.backend)}
+        return {"problem": problem("backend-unavailable", "Backend unavailable", 503,
+                                   scrub_paths(str(exc)), backend=scenario.backend)}
     except ClusterError as exc:
         return {"problem": cluster_problem(exc)}
     except Exception as exc:  # an engine bug must fail this job, not the worker
         log.error("job %s failed:\n%s", order["job_id"], traceback.format_exc())
+        if is_disk_full(exc):
+            return {"problem": disk_full_problem("while the job wrote its results")}
+        # The message may name files under the data directory: clients never see paths.
         return {"problem": problem("internal-error", "Internal error", 500,
-                                   f"{type(exc).__name__}: {exc}")}
+                                   scrub_paths(f"{type(exc).__name__}: {exc}"))}
+    if not (out_dir / "summary.json").exists():  # a job cancelled on Ray left no folder
+        return {"summary": summary, "checksums": {}}
+    if scenario.backend == "auto":
+        ran = summary.get("backend")
+        notes.append(f"backend 'auto' ran on {ran!r}" + (
+            ": no working GPU (cuda, vulkan) was found" if ran == "cpu" else ""))
+    if notes:
+        try:
+            _add_to_summary(out_dir, summary, backend_requested=scenario.backend, notes=notes)
+        except OSError as exc:
+            if is_disk_full(exc):
+                return {"problem": disk_full_problem("while the job wrote its results")}
+            return {"problem": problem("internal-error", "Internal error", 500,
+                                       scrub_paths(f"{type(exc).__name__}: {exc}"))}
     return {"summary": summary, "checksums": checksums(out_dir)}
 
 
@@ -129,6 +145,29 @@ def cluster_problem(exc: Any) -> dict[str, Any]:
                    if isinstance(exc, ClusterUnavailable) else
                    ("cluster-task-lost", "Ray task lost"))
     return problem(slug, title, 503, str(exc), ray_address=exc.address)
+
+
+def _fit_threads(scenario: Any, allowed: int | None) -> tuple[Any, list[str]]:
+    """The scenario with its thread count fitted to this worker's CPUs (R13), and a note
+    when a request had to be capped: more threads than cores only contend for them."""
+    if not allowed:
+        return scenario, []
+    if scenario.threads is None:
+        return scenario.model_copy(update={"threads": allowed}), []
+    if scenario.threads > allowed:
+        note = (f"threads capped from {scenario.threads} to {allowed}, the CPUs this "
+                f"service allots to a job")
+        return scenario.model_copy(update={"threads": allowed}), [note]
+    return scenario, []
+
+
+def _add_to_summary(out_dir: Path, summary: dict[str, Any], **extra: Any) -> None:
+    """Record what the service changed or chose in the job's summary.json (and `summary`)."""
+    summary.update(extra)
+    path = out_dir / "summary.json"
+    tmp = path.with_name(".summary.json.tmp")
+    tmp.write_text(json.dumps(summary, indent=2, allow_nan=False))
+    os.replace(tmp, path)
 
 
 def _warm_up(execute_to_dir: Any, preset: str, scratch: Path) -> None:

@@ -16,6 +16,7 @@ bits for a run: each run's result is `kernels.run` of its scenario alone, wherev
 
 from __future__ import annotations
 
+import os
 import shutil
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -30,7 +31,9 @@ from ..execute import execute_to_dir
 if TYPE_CHECKING:
     from kernels import RunResult
 
-BATCH_RUNS = 64  # runs handed to the engine at once (the batch it may fuse)
+# Runs handed to the engine at once (the batch it may fuse into one launch); smaller
+# batches report and resume at a finer grain. FLOCKLAB_SWEEP_BATCH_RUNS sets it.
+BATCH_RUNS = max(1, int(os.environ.get("FLOCKLAB_SWEEP_BATCH_RUNS", "64")))
 
 ResultFn = Callable[[SweepRun, "RunResult"], None]
 StopFn = Callable[[], bool]

@@ -21,8 +21,10 @@ from .conftest import TEST_ENV, _cleanup
 from .svc_helpers import assert_problem
 
 # Small sweep limits to test against: 12 runs, 10^6 agent-steps.
+# One run per engine call, so cancels and kills land between runs (the engine would fuse
+# a whole batch of these small runs into one launch that ends all of them together).
 SWEEP_ENV = {**TEST_ENV, "FLOCKLAB_MAX_SWEEP_RUNS": "12",
-             "FLOCKLAB_MAX_SWEEP_AGENT_STEPS": "1000000"}
+             "FLOCKLAB_MAX_SWEEP_AGENT_STEPS": "1000000", "FLOCKLAB_SWEEP_BATCH_RUNS": "1"}
 
 
 def sweep_spec(etas: tuple[float, ...] = (0.5, 2.0), replicas: int = 2, n: int = 40,
@@ -108,6 +110,15 @@ def test_sweep_table_equals_the_local_runners(http: httpx.Client, tmp_path: Path
     assert as_json["sweep_id"] == created["id"]
     assert {k: as_json[k] for k in ("columns", "data")} == read_table(local, "json")
     assert [row[1] for row in as_json["data"]] == [0.5, 2.0]  # one row per grid point
+    pytest.importorskip("matplotlib")
+    plot = http.get(f"{base}/render/plot.png", params={"width": 400, "height": 300},
+                    timeout=120)
+    assert plot.status_code == 200, plot.text
+    assert plot.headers["content-type"] == "image/png"
+    import imageio.v3 as iio
+
+    img = iio.imread(plot.content)
+    assert img.shape[:2] == (300, 400) and img.std() > 5  # a drawn plot, not blank
     assert http.get(f"{base}/table").headers["content-type"].startswith("text/csv")
 
     # Sweeps are listed apart from jobs, and a sweep is not a job.

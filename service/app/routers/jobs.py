@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import base64
 import json
-import math
 import time
 from collections.abc import AsyncIterator
 from typing import Annotated
@@ -16,6 +15,7 @@ from starlette.concurrency import run_in_threadpool
 from schemas import FieldError
 from service.jobs import IdempotencyConflict, NewJob, QueueFull
 
+from ..admission import queue_full, queue_gauge
 from ..deps import HubDep, JobId, RuntimeDep, SettingsDep, get_job
 from ..events import wait_for_change
 from ..problems import ProblemError, invalid
@@ -68,10 +68,12 @@ async def submit(
         job, created = await run_in_threadpool(runtime.store.insert, new,
                                                max_queued=settings.max_queued)
     except QueueFull as exc:
-        retry = min(60, 1 + math.ceil(exc.queued / settings.workers))
-        raise ProblemError(429, "queue-full", "Too many queued jobs",
-                           f"{exc.queued} jobs are waiting (limit {settings.max_queued}); "
-                           f"retry later", headers={"Retry-After": str(retry)}) from None
+        gauge = queue_gauge(request.app)
+        assert gauge is not None  # the runtime exists: the store just answered
+        body, headers = queue_full(exc.queued, settings.max_queued, gauge)
+        raise ProblemError(429, "queue-full", body["title"], body["detail"],
+                           headers=headers, retry_after_seconds=body["retry_after_seconds"]
+                           ) from None
     except IdempotencyConflict as exc:
         raise ProblemError(409, "idempotency-conflict", "Idempotency key reused",
                            f"this Idempotency-Key was used for job {exc.job_id} with a "
@@ -164,6 +166,9 @@ async def events(job_id: JobId, runtime: RuntimeDep, settings: SettingsDep, hub:
                 if job.terminal:
                     yield "event: end\ndata: {}\n\n"
                     return
+                if hub.closing:  # the server is shutting down: reconnect later
+                    yield "event: shutdown\ndata: {}\n\n"
+                    return
                 if not await wait_for_change(changed, SSE_KEEPALIVE_SECONDS):
                     yield f": keep-alive {time.time():.0f}\n\n"
 
@@ -181,7 +186,8 @@ def _decode_cursor(cursor: str | None) -> int | None:
     try:
         data = json.loads(base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)))
         seq = data["before"]
-        if not isinstance(seq, int) or isinstance(seq, bool):
+        # SQLite integers are 64-bit: a larger one is an OverflowError, not a row.
+        if not isinstance(seq, int) or isinstance(seq, bool) or not 0 <= seq < 2**63:
             raise ValueError
         return seq
     except (ValueError, KeyError, TypeError):

@@ -1,19 +1,21 @@
 """A job's results: metrics (JSON), trajectory slices (NPZ or JSON) and the H5MD file.
 
-Paths come only from the job's UUID through `ResultStore` (R22). Expired results are 410.
+Paths come only from the job's UUID through `ResultStore` (R22). Expired results are 410
+`results-expired`; a results folder deleted behind the service's back is 410
+`results-missing`; a result file that cannot be read is 500 `results-corrupted` (never a
+generic 500, never the file's path).
 """
 
 from __future__ import annotations
 
 import base64
-import csv
 import json
 import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import h5py
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Header, Query
 from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
@@ -21,17 +23,31 @@ from service.jobs import Job, JobRuntime
 
 from .. import trajectory as traj
 from ..deps import JobId, RuntimeDep, SettingsDep, get_job
+from ..observables import CorruptObservables, read_header, stream_metrics
 from ..problems import ProblemError
+from ..ranges import check_range
 
 router = APIRouter(prefix="/jobs", tags=["results"])
-_ERRORS: dict[int | str, dict[str, Any]] = {401: {}, 404: {}, 409: {}, 410: {}, 422: {}}
+_ERRORS: dict[int | str, dict[str, Any]] = {401: {}, 404: {}, 409: {}, 410: {}, 422: {},
+                                             500: {}}
+
+
+def _expired() -> ProblemError:
+    return ProblemError(410, "results-expired", "Results expired",
+                        "this job's results were deleted after the retention period")
+
+
+def corrupted(name: str) -> ProblemError:
+    """A result file exists but cannot be read (damaged on disk)."""
+    return ProblemError(500, "results-corrupted", "Results corrupted",
+                        f"the job's {name} is damaged on the server and cannot be read; "
+                        f"run the job again", file=name)
 
 
 def _results_dir(runtime: JobRuntime, job_id: JobId) -> tuple[Job, Path]:
     job = get_job(runtime, job_id)
     if job.results_expired:
-        raise ProblemError(410, "results-expired", "Results expired",
-                           "this job's results were deleted after the retention period")
+        raise _expired()
     if not job.has_results:
         if not job.terminal:
             raise ProblemError(409, "results-pending", "Results not ready",
@@ -39,9 +55,12 @@ def _results_dir(runtime: JobRuntime, job_id: JobId) -> tuple[Job, Path]:
         raise ProblemError(404, "no-results", "No results",
                            f"the job ended ({job.status}) without results")
     folder = runtime.results.job_dir(job.id)
-    if not folder.is_dir():  # deleted under us by the expiry sweep
-        raise ProblemError(410, "results-expired", "Results expired",
-                           "this job's results were deleted after the retention period")
+    if not folder.is_dir():
+        if get_job(runtime, job_id).results_expired:  # the expiry sweep won the race
+            raise _expired()
+        raise ProblemError(410, "results-missing", "Results missing",
+                           "this job's results folder is gone from the server's disk although "
+                           "the results had not expired (deleted outside the service)")
     return job, folder
 
 
@@ -51,28 +70,20 @@ def _results_dir(runtime: JobRuntime, job_id: JobId) -> tuple[Job, Path]:
                 "summary": {"status": "completed", "backend": "cpu", "n_agents": 300},
                 "observables": {"step": [0, 1], "time": [0.0, 1.0],
                                 "polarization": [0.04, 0.3]}}}}}, **_ERRORS})
-def metrics(job_id: JobId, runtime: RuntimeDep) -> JSONResponse:
+def metrics(job_id: JobId, runtime: RuntimeDep) -> StreamingResponse:
     job, folder = _results_dir(runtime, job_id)
-    summary = json.loads((folder / "summary.json").read_text())
-    return JSONResponse({"job_id": job.id, "summary": _finite(summary),
-                         "observables": _read_observables(folder / "observables.csv")})
-
-
-def _read_observables(path: Path) -> dict[str, list[float | None]]:
-    with path.open(newline="") as f:
-        rows = list(csv.reader(f))
-    if not rows:
-        return {}
-    names, values = rows[0], rows[1:]
-    return {name: [_number(r[i]) for r in values] for i, name in enumerate(names)}
-
-
-def _number(s: str) -> float | None:
     try:
-        v = float(s)
-    except ValueError:
-        return None
-    return v if math.isfinite(v) else None
+        summary = json.loads((folder / "summary.json").read_bytes())
+    except (OSError, ValueError):
+        raise corrupted("summary.json") from None
+    csv_path = folder / "observables.csv"
+    try:
+        names = read_header(csv_path)
+    except (OSError, CorruptObservables):
+        raise corrupted("observables.csv") from None
+    head = {"job_id": job.id, "summary": _finite(summary)}
+    return StreamingResponse(stream_metrics(head, csv_path, names),
+                             media_type="application/json")
 
 
 def _finite(x: Any) -> Any:
@@ -106,8 +117,10 @@ async def trajectory(
     runtime: RuntimeDep,
     settings: SettingsDep,
     format: Annotated[Literal["npz", "json"], Query(description="Output format.")] = "npz",
-    start: Annotated[int | None, Query(description="First frame index.")] = None,
-    stop: Annotated[int | None, Query(description="Frame index to stop before.")] = None,
+    start: Annotated[int | None, Query(ge=-2**62, le=2**62, description="First frame index."
+                                       )] = None,
+    stop: Annotated[int | None, Query(ge=-2**62, le=2**62,
+                                      description="Frame index to stop before.")] = None,
     stride: Annotated[int, Query(ge=1, le=2**31, description="Take every k-th frame.")] = 1,
     agents: Annotated[str | None, Query(
         max_length=100_000, pattern=r"^[0-9:,]*$",
@@ -119,18 +132,21 @@ async def trajectory(
     path = folder / "trajectory.h5"
 
     def check() -> dict[str, Any] | None:
-        with h5py.File(path, "r") as f:
-            sel = traj.select(f, arrays, start, stop, stride, agents)
-            if format == "npz":
-                return None
-            size = traj.json_size_estimate(f, sel)
-            if size > settings.max_json_bytes:
-                raise ProblemError(
-                    413, "slice-too-large", "Slice too large for JSON",
-                    f"about {size} bytes as JSON, over the cap of {settings.max_json_bytes}; "
-                    f"use format=npz, a stride, or fewer agents", estimated_bytes=size,
-                    max_json_bytes=settings.max_json_bytes)
-            return traj.to_json(f, sel)
+        try:
+            with h5py.File(path, "r") as f:
+                sel = traj.select(f, arrays, start, stop, stride, agents)
+                if format == "npz":
+                    return None
+                size = traj.json_size_estimate(f, sel)
+                if size > settings.max_json_bytes:
+                    raise ProblemError(
+                        413, "slice-too-large", "Slice too large for JSON",
+                        f"about {size} bytes as JSON, over the cap of "
+                        f"{settings.max_json_bytes}; use format=npz, a stride, or fewer "
+                        f"agents", estimated_bytes=size, max_json_bytes=settings.max_json_bytes)
+                return traj.to_json(f, sel)
+        except (OSError, KeyError):  # not HDF5, truncated, or missing its datasets
+            raise corrupted("trajectory.h5") from None
 
     body = await run_in_threadpool(check)
     if body is not None:
@@ -151,13 +167,16 @@ async def trajectory(
     responses={200: {"content": {"application/x-hdf5": {"schema": {"type": "string",
                                                                     "format": "binary"}}}},
                206: {"description": "Partial Content (a Range request)."},
-               416: {}, **_ERRORS},
+               400: {}, 416: {}, **_ERRORS},
 )
-def trajectory_file(job_id: JobId, runtime: RuntimeDep) -> FileResponse:
+def trajectory_file(job_id: JobId, runtime: RuntimeDep,
+                    range_: Annotated[str | None, Header(alias="Range", include_in_schema=False)
+                                      ] = None) -> FileResponse:
     job, _ = _results_dir(runtime, job_id)
     path = runtime.results.file(job.id, "trajectory.h5")
     if not path.is_file():
         raise ProblemError(404, "no-trajectory", "No trajectory", "this job has no trajectory")
+    check_range(range_, path)
     headers = {}
     sums = json.loads(job.checksums) if job.checksums else {}
     if "trajectory.h5" in sums:

@@ -7,7 +7,6 @@ retried once when its worker is lost, continuing from the runs it had finished.
 
 from __future__ import annotations
 
-import math
 import time
 import uuid
 from collections.abc import AsyncIterator
@@ -23,6 +22,7 @@ from schemas.status import SweepList, SweepStatus
 from service.jobs import IdempotencyConflict, Job, JobRuntime, NewJob, QueueFull
 from service.sweeps.tables import read_table
 
+from ..admission import queue_full, queue_gauge
 from ..deps import HubDep, RuntimeDep, SettingsDep, get_job
 from ..events import wait_for_change
 from ..problems import ProblemError
@@ -85,11 +85,12 @@ async def submit(
         job, created = await run_in_threadpool(runtime.store.insert, new,
                                                max_queued=settings.max_queued)
     except QueueFull as exc:
-        retry = min(60, 1 + math.ceil(exc.queued / settings.workers))
-        raise ProblemError(429, "queue-full", "Too many queued jobs",
-                           f"{exc.queued} jobs and sweeps are waiting (limit "
-                           f"{settings.max_queued}); retry later",
-                           headers={"Retry-After": str(retry)}) from None
+        gauge = queue_gauge(request.app)
+        assert gauge is not None  # the runtime exists: the store just answered
+        body, headers = queue_full(exc.queued, settings.max_queued, gauge)
+        raise ProblemError(429, "queue-full", body["title"], body["detail"],
+                           headers=headers, retry_after_seconds=body["retry_after_seconds"]
+                           ) from None
     except IdempotencyConflict as exc:
         raise ProblemError(409, "idempotency-conflict", "Idempotency key reused",
                            f"this Idempotency-Key was used for {exc.job_id} with a "
@@ -188,6 +189,9 @@ async def events(sweep_id: SweepId, runtime: RuntimeDep, settings: SettingsDep, 
                     yield f"event: sweep\ndata: {view}\n\n"
                 if job.terminal:
                     yield "event: end\ndata: {}\n\n"
+                    return
+                if hub.closing:  # the server is shutting down: reconnect later
+                    yield "event: shutdown\ndata: {}\n\n"
                     return
                 if not await wait_for_change(changed, SSE_KEEPALIVE_SECONDS):
                     yield f": keep-alive {time.time():.0f}\n\n"

@@ -1,0 +1,83 @@
+"""M4 small-N benchmark: the fused path against the per-step path, one JSON line each.
+
+    python -m bench.formation_small_n            # N = 5, 20, 100, 1000, then a preset
+    python -m bench.formation_small_n --sizes 5 100 --preset-steps 0
+
+Single runs: the xi-abed-sim3 scenario (F2, linear f, inverse g, d = 20, dt = 0.01,
+observables every 20 steps, no frames) with N agents on a box of side 50 sqrt(N / 100)
+(the preset's density) and `max_exact_candidates: null` (always exact, so that N = 1000
+may take the fused path too), through `kernels.run`, compile excluded by a warm-up run.
+The per-step path is forced with `kernels.engine.FUSED_MAX_N = 0`. Then a preset
+(xi-abed-sim1 by default) at 10^4 steps on both paths. Wall and CPU time
+(`time.process_time`, all threads) with the load average beside them: the machine is
+shared.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+
+
+def scenario(n: int, steps: int):
+    from schemas import Scenario, get_preset
+
+    base = get_preset("xi-abed-sim3").model_dump(mode="json")
+    side = 50.0 * math.sqrt(n / 100.0)
+    base["model"]["max_exact_candidates"] = None
+    base["initial"] = {"kind": "random", "N": n,
+                       "region": {"kind": "box", "low": [0.0, 0.0], "high": [side, side]}}
+    base["time"]["steps"] = steps
+    base["recording"] = {"every": 0, "observables_every": 20}
+    return Scenario.model_validate(base)
+
+
+def timed(sc, fused: bool) -> dict:
+    import kernels
+    from kernels import engine
+
+    engine.FUSED_MAX_N = 20_000 if fused else 0
+    load = os.getloadavg()[0]
+    w0, c0 = time.perf_counter(), time.process_time()
+    res = kernels.run(sc)
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    assert res.status == "completed", res.error
+    assert res.extra["engine_path"] == ("fused" if fused else "per_step")
+    steps = sc.time.steps
+    return {"path": res.extra["engine_path"], "N": sc.n_agents, "steps": steps,
+            "wall_s": round(wall, 3), "cpu_s": round(cpu, 3),
+            "us_per_step_wall": round(1e6 * wall / steps, 1),
+            "us_per_step_cpu": round(1e6 * cpu / steps, 1), "load_1min": load}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[5, 20, 100, 1000])
+    ap.add_argument("--fused-steps", type=int, default=4000)
+    ap.add_argument("--per-step-steps", type=int, default=400)
+    ap.add_argument("--preset", default="xi-abed-sim1")
+    ap.add_argument("--preset-steps", type=int, default=10_000)
+    args = ap.parse_args()
+    from kernels import runtime
+    from schemas import get_preset
+
+    runtime.ensure("cpu")
+    for fused in (True, False):  # compile both paths' kernels first
+        timed(scenario(8, 40), fused)
+    for n in args.sizes:
+        print(json.dumps(timed(scenario(n, args.fused_steps), True)), flush=True)
+        print(json.dumps(timed(scenario(n, args.per_step_steps), False)), flush=True)
+    if args.preset_steps:
+        sc = get_preset(args.preset)
+        sc = sc.model_copy(update={
+            "time": sc.time.model_copy(update={"steps": args.preset_steps}),
+            "recording": sc.recording.model_copy(update={"every": 0})})
+        for fused in (True, False):
+            print(json.dumps({"preset": args.preset, **timed(sc, fused)}), flush=True)
+
+
+if __name__ == "__main__":
+    main()

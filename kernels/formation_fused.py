@@ -1,0 +1,378 @@
+"""M4 on the small-N path: many steps of many replicas in one kernel launch.
+
+The equations are the ones `kernels/formation.py` documents (paper 003, eq. 1-6, 12):
+  rdot_i = f(|l_i - r_i|) (l_i - r_i)/|l_i - r_i| + sum_{|r_ij| < d} g(|r_ji|) r_ji/|r_ji|,
+  l_i = p(t) + b_i(t) (F1) or p(t) (F2), explicit Euler or classical RK4;
+only the schedule differs. One launch advances every replica of a batch through a window
+of steps: replicas in parallel (one per CPU task), each replica's steps and agents
+serially inside, all pairs visited (N is small here), the state kept in the kernel's
+arrays and the observables written into a per-replica buffer. The host comes back only at
+frame, progress and cancellation points, which never changes a bit: a replica computes
+the same numbers alone, in a batch, or cut into any windows.
+
+The leader is evaluated inside the kernel at every step (and RK4 half step): a straight
+path as p0 + q t until the arrival time, F1's schedule (rotations, morphs, smoothstep or
+linear) from the stored formations and their 2x2 weights. A spline path's arc-length
+timing is the host's (`formation_path.SplineTable`, the per-step path's arc-length
+inversion vectorised over t): p(t), and q(t) at observation steps, are tabulated for each
+window (about 0.1 ms per step on the host, the fused path's largest cost for a spline).
+
+Not on this path (`FormationBatch.batch_key` returns None, the per-step path runs them):
+a run whose Euler step could enter the dense regime (9 N > `max_exact_candidates`: the
+per-step path coarse-grains there), N above `MAX_N` (all pairs would cost more than the
+per-step path's grid), and N = 1 (no pair for the minimum distance).
+
+Here: the window kernel and the batch; the terms (f, g, leader, rdot_i, parameter slots)
+are in `formation_fused_terms`, the observables in `formation_fused_observe`.
+"""
+
+from functools import cache
+from typing import Any
+
+import numpy as np
+import taichi as ti
+
+from schemas import Scenario
+from schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
+
+from .formation_forces import F_KINDS, G_KINDS
+from .formation_fused_observe import COMMON, F1_OBS, F2_OBS, N_OBS, OBS, observe
+from .formation_fused_terms import (
+    BAD,
+    CAUSE,
+    DT,
+    EVERY,
+    EXTENT,
+    N_IPRM,
+    N_PRM,
+    NOBS,
+    STEPS,
+    is_nonfinite,
+    leader_state,
+    rate,
+    runaway,
+)
+from .formation_path import SplineTable, make_path
+from .formation_schedule import OffsetSchedule
+from .grid import _WIDEN as GRID_WIDEN
+from .initial import initial_state
+
+nd = ti.types.ndarray()
+MAX_N = 512  # all pairs up to here: at N = 1000 a fused F2 step cost as much CPU as a
+# per-step one (4.3 vs 4.2 ms, the per-step path on 2 threads), at N = 500 1.3 vs 2.2 ms
+SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
+# Why a replica stopped (iprm[CAUSE]), as the per-step path words it: its step check
+# (0, 1), or its grid's check of the positions it buckets (2, 3; kernels/grid.py), which
+# runs first at every step and RK4 stage. Cause 3 is formatted with prm[EXTENT].
+CAUSES = (
+    "two agents at the same position, where g is singular (dt too large lets agents jump "
+    "onto each other)",
+    "non-finite position (dt too large for the repulsion's stiffness at close range)",
+    "a position became non-finite",
+    "the swarm spans {:.3g} length units, over 2^30 neighbour radii (agents escaping: dt "
+    "too large or forces unbounded)",
+)
+
+
+@cache
+def advance_kernel(rk4: bool):
+    """The window kernel and the frame-velocity kernel for one integrator."""
+
+    @ti.kernel
+    def advance(s0: ti.i32, s1: ti.i32, h0: ti.i32, aoff: nd, ooff: nd, prm: nd, iprm: nd,
+                chg: nd, inforce: nd, forms: nd, lead: nd, pos: nd, ps: nd, kk: nd, y: nd,
+                deg: nd, parent: nd, ang: nd, gmax: nd, gcnt: nd, obs: nd):
+        for t in range((aoff.shape[0] - 1) * SPREAD):
+            if t % SPREAD == 0:  # one replica per CPU task
+                b = t // SPREAD
+                a0 = aoff[b]
+                n = aoff[b + 1] - a0
+                steps = iprm[b, STEPS]
+                every = iprm[b, EVERY]
+                dt = prm[b, DT]
+                per = ti.static(2 if rk4 else 1)
+                s = s0
+                while s < s1 and s <= steps and iprm[b, BAD] < 0:
+                    h = s * per
+                    if runaway(b, a0, n, pos, prm, iprm) != 0:
+                        iprm[b, BAD] = s
+                        break
+                    if s % every == 0 or s == steps:
+                        row = ooff[b] + iprm[b, NOBS]
+                        iprm[b, NOBS] += 1
+                        observe(b, a0, n, s, h, h0, row, prm, iprm, chg, inforce, lead,
+                                 forms, pos, deg, parent, ang, gmax, gcnt, obs)
+                    if s < steps:
+                        coincident = 0
+                        nonfinite = 0
+                        lp, _q, ma, mb, ka, kb = leader_state(b, h, h0, prm, iprm, chg,
+                                                               inforce, lead)
+                        if ti.static(not rk4):
+                            for i in range(a0, a0 + n):
+                                ps[i, 0] = pos[i, 0]
+                                ps[i, 1] = pos[i, 1]
+                            for i in range(a0, a0 + n):
+                                r = rate(b, i, a0, n, ps, lp, ma, mb, ka, kb, prm, iprm,
+                                          forms)
+                                x = ps[i, 0] + dt * r[0]
+                                yy = ps[i, 1] + dt * r[1]
+                                pos[i, 0] = x
+                                pos[i, 1] = yy
+                                coincident |= ti.cast(r[2] > 0.0, ti.i32)
+                                nonfinite |= ti.cast(is_nonfinite(x, yy), ti.i32)
+                        else:
+                            # k1 at (x, t); k2, k3 at (x + dt/2 k, t + dt/2); k4 at
+                            # (x + dt k3, t + dt): y holds each stage's positions.
+                            for i in range(a0, a0 + n):
+                                r = rate(b, i, a0, n, pos, lp, ma, mb, ka, kb, prm, iprm,
+                                          forms)
+                                kk[i, 0] = r[0]
+                                kk[i, 1] = r[1]
+                                coincident |= ti.cast(r[2] > 0.0, ti.i32)
+                                nonfinite |= ti.cast(is_nonfinite(r[0], r[1]), ti.i32)
+                            stop = 0  # the stage grid's check stops the step at once
+                            for stage in ti.static(range(1, 4)):
+                                a = 0.5 * dt
+                                if ti.static(stage == 3):
+                                    a = dt
+                                if stop == 0:
+                                    for i in range(a0, a0 + n):
+                                        for c in ti.static(range(2)):
+                                            y[i, c] = pos[i, c] + a * kk[i, 2 * stage - 2 + c]
+                                    stop = runaway(b, a0, n, y, prm, iprm)
+                                if stop == 0:
+                                    hp = h + 1
+                                    if ti.static(stage == 3):
+                                        hp = h + 2
+                                    lq, _q2, mq, mr, kq, kr = leader_state(
+                                        b, hp, h0, prm, iprm, chg, inforce, lead)
+                                    for i in range(a0, a0 + n):
+                                        r = rate(b, i, a0, n, y, lq, mq, mr, kq, kr, prm,
+                                                  iprm, forms)
+                                        kk[i, 2 * stage] = r[0]
+                                        kk[i, 2 * stage + 1] = r[1]
+                                        coincident |= ti.cast(r[2] > 0.0, ti.i32)
+                                        nonfinite |= ti.cast(is_nonfinite(r[0], r[1]), ti.i32)
+                            if stop != 0:
+                                iprm[b, BAD] = s
+                                break
+                            for i in range(a0, a0 + n):
+                                for c in ti.static(range(2)):
+                                    pos[i, c] = pos[i, c] + dt / 6.0 * (
+                                        kk[i, c] + 2.0 * kk[i, 2 + c] + 2.0 * kk[i, 4 + c]
+                                        + kk[i, 6 + c])
+                                nonfinite |= ti.cast(is_nonfinite(pos[i, 0], pos[i, 1]),
+                                                     ti.i32)
+                        if coincident != 0 or nonfinite != 0:
+                            iprm[b, BAD] = s
+                            iprm[b, CAUSE] = ti.select(coincident != 0, 0, 1)
+                    s += 1
+
+    @ti.kernel
+    def velocity(b: ti.i32, h: ti.i32, aoff: nd, prm: nd, iprm: nd, chg: nd, inforce: nd,
+                 forms: nd, lead: nd, pos: nd, vel: nd):
+        """rdot of replica b's agents at their current positions, time index h (a frame);
+        lead's row 0 holds a spline leader's p(t)."""
+        for _ in range(1):  # one serial task: the sums in the step's order
+            a0 = aoff[b]
+            n = aoff[b + 1] - a0
+            lp, _q, ma, mb, ka, kb = leader_state(b, h, h, prm, iprm, chg, inforce, lead)
+            for i in range(a0, a0 + n):
+                r = rate(b, i, a0, n, pos, lp, ma, mb, ka, kb, prm, iprm, forms)
+                vel[i, 0] = r[0]
+                vel[i, 1] = r[1]
+
+    return advance, velocity
+
+
+class FormationBatch:
+    """The state of a batch of M4 replicas (any N <= MAX_N, design, gains, path, schedule,
+    steps each; one integrator), advanced window by window by `advance_kernel`."""
+
+    def __init__(self, scenarios: list[Scenario]):
+        self.scenarios = scenarios
+        p0: FormationParams = scenarios[0].model  # type: ignore[assignment]
+        self.per = 2 if p0.integrator == "rk4" else 1
+        self.advance_k, self.velocity_k = advance_kernel(p0.integrator == "rk4")
+        ns = [s.n_agents for s in scenarios]
+        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
+        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
+        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        B, total = len(scenarios), int(self.aoff[-1])
+        prm = np.zeros((B, N_PRM))
+        iprm = np.zeros((B, N_IPRM), dtype=np.int32)
+        pos = np.zeros((total, 2))
+        chg, inforce, forms = [], [], []
+        self.paths, self.f1 = [], []
+        for b, sc in enumerate(scenarios):
+            p: FormationParams = sc.model  # type: ignore[assignment]
+            n, d, dt = sc.n_agents, sc.neighbours.radius, sc.time.dt
+            init = initial_state(sc)
+            path = make_path(p.path, init.positions.mean(axis=0))
+            if isinstance(p.attraction, SaturatingF):  # as FormationKernel refuses it
+                top = float(np.hypot(*path.velocity(0.0)))
+                if top >= p.attraction.v_max:
+                    raise ValueError(
+                        f"leader speed {top:g} >= attraction.v_max = "
+                        f"{p.attraction.v_max:g}: the agents could never keep up "
+                        "(eq. 8 has no solution)")
+            self.paths.append(path)
+            f1 = p.design == "F1"
+            self.f1.append(f1)
+            a0 = int(self.aoff[b])
+            pos[a0:a0 + n] = init.positions
+            f = p.attraction
+            spline = isinstance(p.path, SplinePath)
+            straight = (np.zeros(2), np.zeros(2), 0.0, np.zeros(2)) if spline else (
+                path.start, path.q, path.arrival_time, path.end)
+            prm[b, :] = [
+                np.nextafter(d * d, np.inf) if sc.inclusive else d * d, d, d * d,
+                p.repulsion.k_g, f.c if isinstance(f, QuadraticF) else f.k,
+                f.v_max if isinstance(f, SaturatingF) else 0.0, dt, dt / self.per,
+                *straight[0], *straight[1], straight[2], *straight[3],
+                p.collision_distance or d / 100.0, p.leader_tolerance or d / 100.0,
+                -1.0 if p.lag_sign == "eq8" else 1.0, d * GRID_WIDEN, 0.0]
+            iprm[b, :] = [sc.time.steps, sc.recording.observables_every, -1, 0, 0,
+                          F_KINDS[f.kind], G_KINDS[p.repulsion.kind], int(f1), int(spline),
+                          len(chg), len(p.schedule), len(inforce), len(forms)]
+            if f1:
+                sched = OffsetSchedule(p.formation, p.schedule, n, d)
+                for c in p.schedule:
+                    chg.append([c.start, c.end, np.nan if c.rotate is None else c.rotate,
+                                float(c.relaxation == "linear")])
+                inforce.extend([k, *m.ravel()] for k, m in sched.in_force)
+                forms.extend(row for k in sched.stored for row in k)
+        self.steps = iprm[:, STEPS].copy()
+
+        def arr(a, shape, dtype=ti.f64) -> ti.Ndarray:
+            a = np.asarray(a, dtype=np.float64 if dtype == ti.f64 else np.int32)
+            out = ti.ndarray(dtype, shape=shape if not a.size else a.shape)
+            if a.size:
+                out.from_numpy(a)
+            return out
+
+        i32 = ti.i32
+        self.args = dict(
+            aoff=arr(self.aoff, None, i32), ooff=arr(self.ooff, None, i32),
+            prm=arr(prm, None), iprm=arr(iprm, None, i32), chg=arr(chg, (1, 4)),
+            inforce=arr(inforce, (1, 5)), forms=arr(forms, (1, 2)),
+            lead0=ti.ndarray(ti.f64, shape=(B, 1, 4)), pos=arr(pos, None),
+            ps=ti.ndarray(ti.f64, shape=(total, 2)),
+            kk=ti.ndarray(ti.f64, shape=(total, 8) if self.per == 2 else (1, 8)),
+            y=ti.ndarray(ti.f64, shape=(total, 2) if self.per == 2 else (1, 2)),
+            deg=ti.ndarray(i32, shape=total), parent=ti.ndarray(i32, shape=total),
+            ang=ti.ndarray(ti.f64, shape=total), gmax=ti.ndarray(ti.f64, shape=total),
+            gcnt=ti.ndarray(i32, shape=total),
+            obs=arr(np.zeros((int(self.ooff[-1]), N_OBS)), None),
+            vel=ti.ndarray(ti.f64, shape=(total, 2)),
+        )
+        self.splines = [b for b, sc in enumerate(scenarios)
+                        if isinstance(sc.model.path, SplinePath)]
+        self.tables = {b: SplineTable(self.paths[b]) for b in self.splines}
+        self.last_p: dict[int, tuple[int, np.ndarray]] = {}  # b: (h, p) of the last row
+        self.now = np.zeros(B, dtype=np.int64)  # each replica's current step
+
+    def _lead_table(self, s0: int, s1: int) -> ti.Ndarray:
+        """The spline leaders' p(t) for the window's time indices (and q(t) at the
+        observation steps), from half-step index s0 * per on."""
+        if not self.splines:
+            return self.args["lead0"]  # read by spline replicas only
+        h0 = s0 * self.per
+        rows = (s1 - s0) * self.per + 1
+        table = np.zeros((len(self.scenarios), rows, 4))
+        for b in self.splines:
+            sc = self.scenarios[b]
+            steps, every = int(self.steps[b]), sc.recording.observables_every
+            h = np.arange(h0, min(s1, steps) * self.per + 1)
+            if not len(h):  # this replica has ended
+                continue
+            s, rem = np.divmod(h, self.per)
+            seen = (rem == 0) & ((s % every == 0) | (s == steps))  # observation steps
+            table[b, : len(h)] = self.tables[b].at(h * (sc.time.dt / self.per), seen)
+            self.last_p[b] = (int(h[-1]), table[b, len(h) - 1, :2].copy())
+        return self._device("lead", table)
+
+    def _device(self, name: str, a: np.ndarray) -> ti.Ndarray:
+        """`a` in a reused device array (windows mostly share one shape; allocating a
+        Taichi ndarray costs more than the copy)."""
+        held = self.args.get(name)
+        if held is None or held.shape != a.shape:
+            held = self.args[name] = ti.ndarray(ti.f64, shape=a.shape)
+        held.from_numpy(a)
+        return held
+
+    def advance(self, s0: int, s1: int) -> None:
+        """Advance every replica from step s0 towards s1 (each stops at its own end)."""
+        a = self.args
+        self.advance_k(s0, s1, s0 * self.per, a["aoff"], a["ooff"], a["prm"], a["iprm"],
+                       a["chg"], a["inforce"], a["forms"], self._lead_table(s0, s1),
+                       a["pos"], a["ps"], a["kk"], a["y"], a["deg"], a["parent"], a["ang"],
+                       a["gmax"], a["gcnt"], a["obs"])
+        self.now = np.minimum(s1, self.steps)
+
+    def end_at(self, step: int) -> None:
+        """Make `step` every replica's last (cancellation): the next window observes it."""
+        iprm = self.args["iprm"].to_numpy()
+        iprm[:, STEPS] = np.minimum(iprm[:, STEPS], step)
+        self.steps = iprm[:, STEPS].copy()
+        self.args["iprm"].from_numpy(iprm)
+
+    def status(self) -> np.ndarray:
+        """Per-replica integer slots (steps, observation count, divergence step, ...)."""
+        return self.args["iprm"].to_numpy()
+
+    def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
+        o0 = self.ooff[b]
+        rows = self.args["obs"].to_numpy()[o0:o0 + iprm[b, NOBS]]
+        keep = COMMON + (F1_OBS if self.f1[b] else F2_OBS)
+        return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
+
+    def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
+        a0, a1 = self.aoff[b], self.aoff[b + 1]
+        a = self.args
+        out = {}
+        if "position" in arrays:
+            out["position"] = a["pos"].to_numpy()[a0:a1]
+        if "velocity" in arrays:
+            h = int(self.now[b]) * self.per
+            table = a["lead0"]
+            if b in self.splines:  # p(t) of the state: the last window's last row
+                at, p = self.last_p.get(b, (-1, None))
+                if at != h:
+                    t = np.array([h * (self.scenarios[b].time.dt / self.per)])
+                    p = self.tables[b].at(t, np.zeros(1, dtype=bool))[0, :2]
+                lead = np.zeros((len(self.scenarios), 1, 4))
+                lead[b, 0, :2] = p
+                table = self._device("frame_lead", lead)
+            self.velocity_k(b, h, a["aoff"], a["prm"], a["iprm"], a["chg"], a["inforce"],
+                            a["forms"], table, a["pos"], a["vel"])
+            out["velocity"] = a["vel"].to_numpy()[a0:a1]
+        return out
+
+    def convergence_keys(self) -> list[str]:
+        return ["formation_error", "velocity_mismatch_max"]
+
+    def extra(self, b: int, iprm: np.ndarray) -> dict[str, Any]:
+        return {"leader_arrival_time": self.paths[b].arrival_time,
+                "dense_regime": {"steps": 0, "max_reach": 1}}
+
+    def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
+        step = int(iprm[b, BAD])
+        if step < 0:
+            return None
+        cause = CAUSES[iprm[b, CAUSE]]
+        if iprm[b, CAUSE] == 3:
+            cause = cause.format(float(self.args["prm"].to_numpy()[b, EXTENT]))
+        return step, "position", cause
+
+    @staticmethod
+    def batch_key(scenario: Scenario) -> tuple | None:
+        """Scenarios with the same key share a launch; None: not for this path (see the
+        module docstring)."""
+        p: FormationParams = scenario.model  # type: ignore[assignment]
+        n = scenario.n_agents
+        cap = p.max_exact_candidates
+        if n < 2 or n > MAX_N or (p.integrator == "euler" and cap is not None
+                                  and 9 * n > cap):
+            return None
+        return ("formation", p.integrator)

@@ -1,0 +1,206 @@
+"""The fused M4 path's observation: every observable of the per-step path (FormationKernel
+.observe, formation_props' D1-D3) of one replica's state, into one row of its buffer."""
+
+import numpy as np
+import taichi as ti
+
+from .formation_fused_terms import (
+    COLLIDE,
+    D2,
+    F1,
+    FA,
+    FB,
+    FKIND,
+    GKIND,
+    KG,
+    LAG_SIGN,
+    R2,
+    TOL,
+    D,
+    attract,
+    attraction_energy,
+    find,
+    g_over_s,
+    lag_length,
+    leader_state,
+    pair_energy,
+    target,
+)
+
+TWO_PI = 2 * np.pi
+_NO_PAIR = 1e300  # nearest-pair sentinel
+# Observable columns of the buffer (the step first); F1 and F2 fill their own.
+OBS = ("step", "leader_x", "leader_y", "leader_speed", "centroid_x", "centroid_y",
+       "centroid_distance", "speed_min", "speed_mean", "speed_max", "speed_error_max",
+       "velocity_mismatch_max", "min_distance", "degree_mean", "formation_error",
+       "formation_error_max", "lag", "V1", "V2", "D1", "D2", "D3", "isolated", "components")
+N_OBS = len(OBS)
+COMMON = OBS[1:14]
+F1_OBS = ("formation_error", "formation_error_max", "lag", "V1")
+F2_OBS = ("V2", "D1", "D2", "D3", "isolated", "components")
+
+
+
+
+@ti.func
+def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
+             chg: ti.template(), inforce: ti.template(), lead: ti.template(),
+             forms: ti.template(), pos: ti.template(), deg: ti.template(),
+             parent: ti.template(), ang: ti.template(), gmax: ti.template(),
+             gcnt: ti.template(), obs: ti.template()):
+    """The observables of X(s) (time index h) into obs[row]: the columns of OBS."""
+    p, q, ma, mb, ka, kb = leader_state(b, h, h0, prm, iprm, chg, inforce, lead)
+    fk = iprm[b, FKIND]
+    fa = prm[b, FA]
+    fb = prm[b, FB]
+    gk = iprm[b, GKIND]
+    kg = prm[b, KG]
+    d = prm[b, D]
+    d2 = prm[b, D2]
+    r2 = prm[b, R2]
+    f1 = iprm[b, F1] != 0
+    qn = ti.sqrt(q.dot(q))
+    lag = lag_length(qn, fk, fa, fb)
+    a = ti.math.vec2(0.0)
+    if qn > 0.0:
+        a = (lag / qn) * q * prm[b, LAG_SIGN]
+    tol = prm[b, TOL]
+    for i in range(a0, a0 + n):
+        parent[i] = i
+    cx = 0.0
+    cy = 0.0
+    smin = ti.math.inf
+    ssum = 0.0
+    smax = 0.0
+    serr = 0.0
+    vmis = 0.0
+    near = _NO_PAIR
+    dsum = 0
+    gsum = 0.0
+    esum = 0.0
+    emax = 0.0
+    fsum = 0.0
+    lead_k = -1  # the agent at r_0 (F2): the nearest to p, within the tolerance
+    lead_d = ti.math.inf
+    for i in range(a0, a0 + n):
+        xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+        rep = ti.math.vec2(0.0)
+        k = 0
+        for j in range(a0, a0 + n):
+            if j != i:
+                dv = ti.math.vec2(pos[j, 0] - xi[0], pos[j, 1] - xi[1])
+                e2 = dv.dot(dv)
+                near = ti.min(near, e2)
+                if e2 < r2:
+                    k += 1
+                    if e2 > 0.0:
+                        sd = ti.sqrt(e2)
+                        rep += g_over_s(sd, gk, kg, d, d2) * dv
+                        gsum += pair_energy(sd, gk, kg, d, d2)
+                    if j > i and not f1:
+                        ri = find(parent, i)
+                        rj = find(parent, j)
+                        if ri != rj:
+                            parent[ti.max(ri, rj)] = ti.min(ri, rj)
+        deg[i] = k
+        dsum += k
+        li = target(b, i, a0, n, p, ma, mb, ka, kb, iprm, forms)
+        v = attract(li - xi, fk, fa, fb) + rep
+        sp = ti.sqrt(v.dot(v))
+        smin = ti.min(smin, sp)
+        smax = ti.max(smax, sp)
+        ssum += sp
+        serr = ti.max(serr, ti.abs(sp - qn))
+        vm = v - q
+        vmis = ti.max(vmis, ti.sqrt(vm.dot(vm)))
+        cx += xi[0]
+        cy += xi[1]
+        if f1:
+            err = xi - (li + a)
+            e = ti.sqrt(err.dot(err))
+            esum += e
+            emax = ti.max(emax, e)
+            fsum += attraction_energy(e, fk, fa, fb)
+        else:
+            rel = xi - p
+            e = ti.sqrt(rel.dot(rel))
+            fsum += attraction_energy(e, fk, fa, fb)
+            ang[i] = ti.atan2(rel[1], rel[0])
+            if e < lead_d:
+                lead_d = e
+                lead_k = i
+            gmax[i] = -1.0  # no far agent in i's component (yet)
+            gcnt[i] = 0
+    c = ti.math.vec2(cx / n, cy / n)
+    obs[row, 0] = s
+    obs[row, 1] = p[0]
+    obs[row, 2] = p[1]
+    obs[row, 3] = qn
+    obs[row, 4] = c[0]
+    obs[row, 5] = c[1]
+    obs[row, 6] = ti.sqrt((c - p).dot(c - p))
+    obs[row, 7] = smin
+    obs[row, 8] = ssum / n
+    obs[row, 9] = smax
+    obs[row, 10] = serr
+    obs[row, 11] = vmis
+    obs[row, 12] = ti.sqrt(near)
+    obs[row, 13] = ti.cast(dsum, ti.f64) / n
+    if f1:
+        obs[row, 14] = esum / n
+        obs[row, 15] = emax
+        obs[row, 16] = lag
+        obs[row, 17] = fsum + 0.5 * gsum
+    else:
+        obs[row, 18] = fsum + 0.5 * gsum
+        obs[row, 19] = ti.cast(ti.sqrt(near) >= prm[b, COLLIDE], ti.f64)  # D1
+        if lead_d > tol:
+            lead_k = -1
+        iso = 0
+        comps = 0
+        for i in range(a0, a0 + n):
+            if deg[i] == 0 and i != lead_k:
+                iso += 1
+            if find(parent, i) == i:
+                comps += 1
+        obs[row, 20] = ti.cast(iso == 0, ti.f64)  # D2
+        obs[row, 22] = iso
+        obs[row, 23] = comps
+        # D3 (formation_props.d3_holds): per component, the counter-clockwise gaps between
+        # the far agents' directions from r_0, in (angle, id) order; the successor is
+        # found by a scan (O(n * component size), small at these N).
+        for k in range(a0, a0 + n):
+            pk = pos[k, 0] - p[0]
+            qk = pos[k, 1] - p[1]
+            if ti.sqrt(pk * pk + qk * qk) > tol:
+                root = find(parent, k)
+                best = ti.math.inf
+                best_m = -1
+                first = ti.math.inf
+                first_m = -1
+                for m in range(a0, a0 + n):
+                    pm = pos[m, 0] - p[0]
+                    qm = pos[m, 1] - p[1]
+                    if ti.sqrt(pm * pm + qm * qm) > tol and find(parent, m) == root:
+                        am = ang[m]
+                        if am < first or (am == first and m < first_m):
+                            first = am
+                            first_m = m
+                        after = am > ang[k] or (am == ang[k] and m > k)
+                        if after and (am < best or (am == best and m < best_m)):
+                            best = am
+                            best_m = m
+                gap = best - ang[k]
+                if best_m < 0:
+                    gap = first + TWO_PI - ang[k]
+                gmax[root] = ti.max(gmax[root], gap)
+                if gap > np.pi - 1e-9:
+                    gcnt[root] += 1
+        d3 = 1.0
+        for k in range(a0, a0 + n):
+            if gmax[k] >= 0.0:  # a root with far agents
+                inside = gmax[k] < np.pi - 1e-9
+                on_line = gcnt[k] == 2 and gmax[k] <= np.pi + 1e-9
+                if not (inside or on_line):
+                    d3 = 0.0
+        obs[row, 21] = d3

@@ -1,0 +1,571 @@
+// flocklab's browser viewer: plain JavaScript against the public API (no build step, no
+// CDN). The API key, when the service needs one, is typed once and kept in
+// sessionStorage (this tab only); every request carries it as X-API-Key, which is why
+// the event stream is read with fetch() rather than EventSource (which cannot send it).
+"use strict";
+
+const KEY_STORE = "flocklab-api-key";
+const HUES = 24;  // heading colours: agents are drawn in one path per hue bucket
+const BASE_FPS = 20;  // recorded frames per second at speed 1x
+const TRAJECTORY_BUDGET = 48 * 2 ** 20;  // bytes of frames fetched for playback
+const USUAL = {
+  vicsek: ["polarization", "heading_spread", "components"],
+  flocking: ["velocity_disagreement", "speed_mean", "components"],
+  flocking_obstacles: ["velocity_disagreement_components", "destination_distance_mean"],
+  formation: ["formation_error", "velocity_mismatch_max", "min_distance"],
+};
+
+const $ = (id) => document.getElementById(id);
+const state = { key: sessionStorage.getItem(KEY_STORE) || "", presets: [], selected: null,
+                follow: null, player: null, jobs: [] };
+
+// -- HTTP ---------------------------------------------------------------------------------
+
+function authHeaders(extra) {
+  const h = Object.assign({}, extra || {});
+  if (state.key) h["X-API-Key"] = state.key;
+  return h;
+}
+
+async function api(path, options) {
+  const opts = Object.assign({}, options || {});
+  opts.headers = authHeaders(opts.headers);
+  const r = await fetch(path, opts);
+  const type = r.headers.get("content-type") || "";
+  const body = type.includes("json") ? await r.json() : null;
+  if (!r.ok) {
+    const err = new Error((body && (body.detail || body.title)) || r.statusText);
+    err.status = r.status;
+    err.problem = body;
+    throw err;
+  }
+  return body;
+}
+
+// -- API key ------------------------------------------------------------------------------
+
+function showKeyState() {
+  $("key-state").textContent = state.key ? "key set for this tab" : "";
+  $("api-key").value = state.key;
+}
+
+$("key-form").addEventListener("submit", (ev) => {
+  ev.preventDefault();
+  state.key = $("api-key").value.trim();
+  if (state.key) sessionStorage.setItem(KEY_STORE, state.key);
+  else sessionStorage.removeItem(KEY_STORE);
+  showKeyState();
+  start();
+});
+
+// -- the scenario form --------------------------------------------------------------------
+
+function flatten(obj, prefix, out) {
+  for (const [k, v] of Object.entries(obj)) {
+    const path = prefix ? `${prefix}.${k}` : k;
+    if (v !== null && typeof v === "object" && !Array.isArray(v)) flatten(v, path, out);
+    else out.push([path, v]);
+  }
+  return out;
+}
+
+function setPath(obj, path, value) {
+  const parts = path.split(".");
+  let o = obj;
+  for (const p of parts.slice(0, -1)) o = o[p] = o[p] || {};
+  o[parts[parts.length - 1]] = value;
+}
+
+function modelProperty(schema, path) {
+  // The model's JSON Schema describes model.*; the scenario's other blocks are plain.
+  if (!schema || !path.startsWith("model.") || path.split(".").length !== 2) return null;
+  return (schema.properties || {})[path.split(".")[1]] || null;
+}
+
+async function showPreset(name) {
+  const preset = state.presets.find((p) => p.name === name);
+  const fields = $("fields");
+  fields.replaceChildren();
+  $("submit-error").textContent = "";
+  if (!preset) return;
+  let schema = null;
+  try { schema = await api(`/v1/models/${preset.scenario.model.kind}`); } catch (e) { /* plain */ }
+  for (const [path, value] of flatten(preset.scenario, "", [])) {
+    const row = document.createElement("div");
+    row.className = "field";
+    row.dataset.path = path;
+    const id = "f-" + path.replace(/\W/g, "_");
+    const label = document.createElement("label");
+    label.htmlFor = id;
+    label.textContent = path;
+    const prop = modelProperty(schema, path);
+    let input;
+    if (prop && Array.isArray(prop.enum)) {  // a choice: the schema's values
+      input = document.createElement("select");
+      for (const choice of prop.enum) {
+        const o = document.createElement("option");
+        o.value = o.textContent = String(choice);
+        input.append(o);
+      }
+      input.dataset.kind = "string";
+    } else {
+      input = document.createElement("input");
+      input.dataset.kind = typeof value === "number" ? "number"
+        : typeof value === "boolean" ? "boolean" : typeof value === "string" ? "string" : "json";
+      input.readOnly = Boolean(prop && "const" in prop);
+    }
+    input.id = id;
+    input.name = path;
+    input.value = input.dataset.kind === "json" || input.dataset.kind === "boolean"
+      ? JSON.stringify(value) : String(value);
+    input.title = (prop && prop.description) || "";
+    const msg = document.createElement("div");
+    msg.className = "field-error";
+    row.append(label, input, msg);
+    fields.append(row);
+  }
+}
+
+function readForm() {
+  const scenario = {};
+  let ok = true;
+  for (const row of $("fields").querySelectorAll(".field")) {
+    const input = row.querySelector("input, select");
+    const text = input.value.trim();
+    let value = text;
+    if (input.dataset.kind === "number") {
+      value = text !== "" && Number.isFinite(Number(text)) ? Number(text) : text;
+    } else if (input.dataset.kind !== "string") {
+      try { value = JSON.parse(text); } catch (e) {
+        ok = false;
+        markField(row, "not valid JSON");
+      }
+    }
+    setPath(scenario, row.dataset.path, value);
+  }
+  return ok ? scenario : null;
+}
+
+function clearMarks() {
+  for (const row of $("fields").querySelectorAll(".field")) {
+    row.classList.remove("invalid");
+    row.querySelector(".field-error").textContent = "";
+  }
+  $("submit-error").textContent = "";
+}
+
+function markField(row, message) {
+  row.classList.add("invalid");
+  const el = row.querySelector(".field-error");
+  el.textContent = el.textContent ? `${el.textContent}; ${message}` : message;
+}
+
+function showProblem(problem) {
+  const rows = [...$("fields").querySelectorAll(".field")];
+  const loose = [];
+  for (const e of (problem && problem.errors) || []) {
+    const loc = String(e.loc).replace(/^scenario\./, "");
+    // the field itself, else the deepest field under the location (a whole block)
+    const row = rows.find((r) => r.dataset.path === loc)
+      || rows.find((r) => r.dataset.path.startsWith(loc + "."))
+      || rows.filter((r) => loc.startsWith(r.dataset.path + ".")).pop();
+    if (row) markField(row, e.msg);
+    else loose.push(`${e.loc}: ${e.msg}`);
+  }
+  $("submit-error").textContent = loose.length ? loose.join("\n")
+    : (problem && !(problem.errors || []).length ? problem.detail || problem.title : "");
+}
+
+$("preset").addEventListener("change", () => showPreset($("preset").value));
+
+$("submit-form").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  clearMarks();
+  const scenario = readForm();
+  if (!scenario) return;
+  $("submit").disabled = true;
+  try {
+    const job = await api("/v1/jobs", { method: "POST", body: JSON.stringify({ scenario }),
+                                        headers: { "Content-Type": "application/json" } });
+    await refreshJobs();
+    selectJob(job.id);
+  } catch (err) {
+    if (err.problem) showProblem(err.problem);
+    else $("submit-error").textContent = err.message;
+  } finally {
+    $("submit").disabled = false;
+  }
+});
+
+// -- the job list -------------------------------------------------------------------------
+
+async function refreshJobs() {
+  try {
+    const page = await api("/v1/jobs?limit=30");
+    state.jobs = page.items;
+    $("list-state").textContent = "";
+  } catch (err) {
+    $("list-state").textContent = err.status === 401 ? "(enter the API key)" : `(${err.message})`;
+    return;
+  }
+  const body = document.querySelector("#jobs tbody");
+  body.replaceChildren(...state.jobs.map((j) => {
+    const tr = document.createElement("tr");
+    tr.dataset.id = j.id;
+    tr.className = j.id === state.selected ? "selected" : "";
+    const cells = [j.id.slice(0, 8), j.model, String(j.n_agents), j.status];
+    for (const [i, text] of cells.entries()) {
+      const td = document.createElement("td");
+      td.textContent = text;
+      if (i === 0) td.className = "mono";
+      if (i === 3) td.className = `status ${j.status}`;
+      tr.append(td);
+    }
+    const td = document.createElement("td");
+    const bar = document.createElement("progress");
+    bar.max = 1;
+    bar.value = j.progress;
+    td.append(bar);
+    tr.append(td);
+    tr.addEventListener("click", () => selectJob(j.id));
+    return tr;
+  }));
+}
+
+// -- one job: live status over SSE, then its results ---------------------------------------
+
+function showJob(job) {
+  $("job-id").textContent = job.id;
+  const st = $("job-status");
+  st.textContent = job.status;
+  st.className = `status ${job.status}`;
+  $("job-progress").value = job.progress;
+  $("job-progress-text").textContent = `${Math.round(job.progress * 100)}%  `
+    + `step ${job.steps_done}/${job.steps_total}`;
+  $("cancel").disabled = ["succeeded", "failed", "cancelled", "timed_out"].includes(job.status);
+  $("job-error").textContent = job.error ? `${job.error.title}: ${job.error.detail || ""}` : "";
+  const row = document.querySelector(`#jobs tr[data-id="${job.id}"]`);
+  if (row) {
+    row.children[3].textContent = job.status;
+    row.children[3].className = `status ${job.status}`;
+    row.querySelector("progress").value = job.progress;
+  }
+}
+
+async function selectJob(id) {
+  if (state.follow) state.follow.abort();
+  stopPlayer();
+  state.selected = id;
+  for (const tr of document.querySelectorAll("#jobs tbody tr")) {
+    tr.classList.toggle("selected", tr.dataset.id === id);
+  }
+  $("downloads").replaceChildren();
+  clearPlot();
+  const follow = new AbortController();
+  state.follow = follow;
+  let last = null;
+  try {
+    await readEvents(`/v1/jobs/${id}/events`, follow.signal, (event, data) => {
+      if (event === "job") { last = JSON.parse(data); showJob(last); }
+    });
+  } catch (err) {
+    if (follow.signal.aborted) return;
+    $("job-error").textContent = err.message;
+    return;
+  }
+  if (!follow.signal.aborted && last && last.results === "available") await loadResults(last);
+}
+
+async function readEvents(path, signal, onEvent) {
+  const r = await fetch(path, { headers: authHeaders({ Accept: "text/event-stream" }), signal });
+  if (!r.ok) throw new Error(`events: ${r.status} ${r.statusText}`);
+  const reader = r.body.getReader();
+  const decoder = new TextDecoder();
+  let buf = "";
+  for (;;) {
+    const { value, done } = await reader.read();
+    if (done) return;
+    buf += decoder.decode(value, { stream: true });
+    let cut;
+    while ((cut = buf.indexOf("\n\n")) >= 0) {
+      const chunk = buf.slice(0, cut);
+      buf = buf.slice(cut + 2);
+      let event = "message", data = "";
+      for (const line of chunk.split("\n")) {
+        if (line.startsWith("event:")) event = line.slice(6).trim();
+        else if (line.startsWith("data:")) data += line.slice(5).trim();
+      }
+      if (event === "end") return;
+      onEvent(event, data);
+    }
+  }
+}
+
+$("cancel").addEventListener("click", async () => {
+  if (!state.selected) return;
+  try { showJob(await api(`/v1/jobs/${state.selected}/cancel`, { method: "POST" })); }
+  catch (err) { $("job-error").textContent = err.message; }
+});
+
+function downloadButton(label, path, filename) {
+  const b = document.createElement("button");
+  b.textContent = label;
+  b.dataset.href = path;
+  b.addEventListener("click", async () => {
+    const r = await fetch(path, { headers: authHeaders() });
+    if (!r.ok) { $("job-error").textContent = `${label}: ${r.status} ${r.statusText}`; return; }
+    const url = URL.createObjectURL(await r.blob());
+    const a = document.createElement("a");
+    a.href = url;
+    a.download = filename;
+    a.click();
+    setTimeout(() => URL.revokeObjectURL(url), 10000);
+  });
+  return b;
+}
+
+async function loadResults(job) {
+  const base = `/v1/jobs/${job.id}`;
+  const short = job.id.slice(0, 8);
+  $("downloads").replaceChildren(
+    downloadButton("trajectory.h5", `${base}/trajectory.h5`, `${short}.h5`),
+    downloadButton("metrics.json", `${base}/metrics`, `${short}-metrics.json`),
+    downloadButton("snapshot.png", `${base}/render/snapshot.png`, `${short}-snapshot.png`),
+    downloadButton("observables.png", `${base}/render/observables.png`, `${short}-obs.png`),
+    downloadButton("movie.mp4", `${base}/render/movie.mp4`, `${short}.mp4`));
+  const metrics = await api(`${base}/metrics`);
+  drawPlot(metrics, job.model);
+  const frames = metrics.summary.frames || 0;
+  if (frames > 0) await loadTrajectory(job, frames);
+}
+
+// -- playback -----------------------------------------------------------------------------
+
+async function loadTrajectory(job, frames) {
+  const n = job.n_agents;
+  const perAgentFrame = 4 * 8;  // position + velocity, or position + heading (less)
+  const agentStride = Math.max(1, Math.ceil(n * perAgentFrame / TRAJECTORY_BUDGET));
+  const shown = Math.ceil(n / agentStride);
+  const stride = Math.max(1, Math.ceil(frames * shown * perAgentFrame / TRAJECTORY_BUDGET));
+  const query = `stride=${stride}` + (agentStride > 1 ? `&agents=0:${n}:${agentStride}` : "");
+  const r = await fetch(`/v1/jobs/${job.id}/trajectory?${query}`, { headers: authHeaders() });
+  if (!r.ok) { $("job-error").textContent = `trajectory: ${r.status}`; return; }
+  const arrays = readNpz(await r.arrayBuffer());
+  setPlayer(arrays);
+}
+
+function setPlayer(arrays) {
+  const pos = arrays.position;
+  const [frames, n] = pos.shape;
+  let heading = arrays.heading ? arrays.heading.data : null;
+  if (!heading && arrays.velocity) {
+    const v = arrays.velocity.data;
+    heading = new Float64Array(frames * n);
+    for (let i = 0; i < frames * n; i++) heading[i] = Math.atan2(v[2 * i + 1], v[2 * i]);
+  }
+  if (!heading) heading = new Float64Array(frames * n);
+  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  const p = pos.data;
+  for (let i = 0; i < frames * n; i++) {
+    const x = p[2 * i], y = p[2 * i + 1];
+    if (x < x0) x0 = x; if (x > x1) x1 = x; if (y < y0) y0 = y; if (y > y1) y1 = y;
+  }
+  const half = Math.max(x1 - x0, y1 - y0, 1e-9) / 2 * 1.05;
+  const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
+  state.player = { frames, n, pos: p, heading, time: arrays.time ? arrays.time.data : null,
+                   step: arrays.step ? arrays.step.data : null, frame: 0, playing: false,
+                   view: [cx - half, cy - half, 2 * half], acc: 0, last: 0,
+                   bucket: new Uint8Array(n), order: new Int32Array(n),
+                   counts: new Int32Array(HUES + 1), draws: 0, fpsSince: performance.now() };
+  $("scrub").max = String(frames - 1);
+  $("scrub").value = "0";
+  $("scrub").disabled = false;
+  $("play").disabled = false;
+  drawFrame(0);
+}
+
+function stopPlayer() {
+  if (state.player) state.player.playing = false;
+  state.player = null;
+  $("play").textContent = "Play";
+  $("play").disabled = true;
+  $("scrub").disabled = true;
+  const c = $("canvas");
+  c.getContext("2d").clearRect(0, 0, c.width, c.height);
+  $("frame-info").textContent = "";
+  $("fps").textContent = "";
+}
+
+const HUE_COLOURS = Array.from({ length: HUES }, (_, b) => `hsl(${(b + 0.5) * 360 / HUES}, 90%, 45%)`);
+
+function drawFrame(k) {
+  const pl = state.player;
+  if (!pl) return;
+  const canvas = $("canvas");
+  const ctx = canvas.getContext("2d");
+  const size = canvas.width;
+  const [vx, vy, vw] = pl.view;
+  const s = size / vw;
+  const base = k * pl.n;
+  // counting sort of the agents by heading colour: one stroke per colour
+  const counts = pl.counts;
+  counts.fill(0);
+  for (let i = 0; i < pl.n; i++) {
+    const h = pl.heading[base + i];
+    let b = Math.floor(((h + Math.PI) / (2 * Math.PI) - Math.floor((h + Math.PI) / (2 * Math.PI))) * HUES);
+    if (!(b >= 0 && b < HUES)) b = 0;
+    pl.bucket[i] = b;
+    counts[b + 1]++;
+  }
+  for (let b = 0; b < HUES; b++) counts[b + 1] += counts[b];
+  const fill = counts.slice(0, HUES);
+  for (let i = 0; i < pl.n; i++) pl.order[fill[pl.bucket[i]]++] = i;
+  ctx.fillStyle = "#fff";
+  ctx.fillRect(0, 0, size, size);
+  const len = pl.n > 2000 ? 4 : pl.n > 200 ? 7 : 12;
+  ctx.lineWidth = pl.n > 2000 ? 1 : 2;
+  for (let b = 0; b < HUES; b++) {
+    if (counts[b] === counts[b + 1]) continue;
+    ctx.strokeStyle = HUE_COLOURS[b];
+    ctx.beginPath();
+    for (let j = counts[b]; j < counts[b + 1]; j++) {
+      const i = pl.order[j];
+      const x = (pl.pos[2 * (base + i)] - vx) * s;
+      const y = size - (pl.pos[2 * (base + i) + 1] - vy) * s;
+      const h = pl.heading[base + i];
+      ctx.moveTo(x - 0.3 * len * Math.cos(h), y + 0.3 * len * Math.sin(h));
+      ctx.lineTo(x + len * Math.cos(h), y - len * Math.sin(h));
+    }
+    ctx.stroke();
+  }
+  pl.frame = k;
+  pl.draws++;
+  $("scrub").value = String(k);
+  const t = pl.time ? pl.time[k] : k;
+  $("frame-info").textContent = `frame ${k + 1}/${pl.frames}  t = ${Number(t).toPrecision(4)}`;
+}
+
+function tick(now) {
+  const pl = state.player;
+  if (!pl || !pl.playing) return;
+  const speed = Number($("speed").value);
+  pl.acc += (now - (pl.last || now)) / 1000 * BASE_FPS * speed;
+  pl.last = now;
+  const advance = Math.floor(pl.acc);
+  if (advance > 0) {
+    pl.acc -= advance;
+    drawFrame((pl.frame + advance) % pl.frames);
+  }
+  if (now - pl.fpsSince > 1000) {
+    $("fps").textContent = `${(pl.draws * 1000 / (now - pl.fpsSince)).toFixed(0)} fps`;
+    pl.draws = 0;
+    pl.fpsSince = now;
+  }
+  requestAnimationFrame(tick);
+}
+
+$("play").addEventListener("click", () => {
+  const pl = state.player;
+  if (!pl) return;
+  pl.playing = !pl.playing;
+  $("play").textContent = pl.playing ? "Pause" : "Play";
+  if (pl.playing) {
+    pl.last = 0;
+    pl.draws = 0;
+    pl.fpsSince = performance.now();
+    requestAnimationFrame(tick);
+  }
+});
+
+$("scrub").addEventListener("input", () => drawFrame(Number($("scrub").value)));
+
+// Draws `count` frames back to back and returns frames per second (the browser test's
+// playback measurement; the display's refresh rate caps the live counter, not this).
+function measurePlayback(count) {
+  const pl = state.player;
+  if (!pl) return null;
+  const t0 = performance.now();
+  for (let i = 0; i < count; i++) drawFrame(i % pl.frames);
+  const ctx = $("canvas").getContext("2d");
+  ctx.getImageData(0, 0, 1, 1);  // wait for the drawing to finish
+  return count / ((performance.now() - t0) / 1000);
+}
+
+// -- observables --------------------------------------------------------------------------
+
+function clearPlot() {
+  const c = $("plot");
+  c.getContext("2d").clearRect(0, 0, c.width, c.height);
+  $("plot-legend").textContent = "";
+}
+
+function drawPlot(metrics, model) {
+  const obs = metrics.observables;
+  const names = (USUAL[model] || []).filter((n) => n in obs);
+  if (!names.length) names.push(...Object.keys(obs).filter((n) => n !== "step" && n !== "time").slice(0, 3));
+  const t = obs.time || [];
+  const c = $("plot");
+  const ctx = c.getContext("2d");
+  ctx.clearRect(0, 0, c.width, c.height);
+  const panel = c.height / Math.max(1, names.length);
+  const tmax = t.length ? t[t.length - 1] : 1;
+  const conv = (metrics.summary && metrics.summary.convergence) || {};
+  ctx.font = "11px sans-serif";
+  names.forEach((name, p) => {
+    const ys = obs[name].filter((v) => v !== null);
+    const lo = Math.min(...ys), hi = Math.max(...ys);
+    const top = p * panel + 14, h = panel - 24, left = 50, w = c.width - 60;
+    ctx.strokeStyle = "#ccd";
+    ctx.strokeRect(left, top, w, h);
+    ctx.fillStyle = "#334";
+    ctx.fillText(name, left + 4, top - 3);
+    ctx.fillText(hi.toPrecision(3), 2, top + 9);
+    ctx.fillText(lo.toPrecision(3), 2, top + h);
+    ctx.strokeStyle = "#1565c0";
+    ctx.beginPath();
+    obs[name].forEach((v, i) => {
+      if (v === null) return;
+      const x = left + (t[i] / (tmax || 1)) * w;
+      const y = top + h - (hi > lo ? (v - lo) / (hi - lo) : 0.5) * h;
+      if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
+    });
+    ctx.stroke();
+    if (typeof conv[name] === "number") {
+      const x = left + (conv[name] / (tmax || 1)) * w;
+      ctx.strokeStyle = "#c62828";
+      ctx.setLineDash([4, 3]);
+      ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, top + h); ctx.stroke();
+      ctx.setLineDash([]);
+    }
+  });
+  $("plot-legend").textContent = `time 0 … ${Number(tmax).toPrecision(4)}`
+    + (Object.keys(conv).length ? "; dashed: convergence time" : "");
+}
+
+// -- start --------------------------------------------------------------------------------
+
+let listTimer = null;
+
+async function start() {
+  showKeyState();
+  try {
+    state.presets = await api("/v1/presets");
+  } catch (err) {
+    $("list-state").textContent = err.status === 401 ? "(enter the API key)" : `(${err.message})`;
+    return;
+  }
+  const sel = $("preset");
+  sel.replaceChildren(...state.presets.map((p) => {
+    const o = document.createElement("option");
+    o.value = p.name;
+    o.textContent = p.name;
+    o.title = p.description;
+    return o;
+  }));
+  await showPreset(sel.value);
+  await refreshJobs();
+  if (listTimer === null) listTimer = setInterval(refreshJobs, 2000);
+}
+
+window.flocklabViewer = { state, measurePlayback, drawFrame, selectJob };
+start();

@@ -1,0 +1,106 @@
+"""What a model draws besides its agents: interaction edges, obstacles and destination
+(M3), the virtual leaders, their path and the formation offsets (M4).
+
+The fixed graphs and the formation offsets are rebuilt with the engine's own pure-numpy
+helpers (`kernels.topology`, `kernels.formation_*`), so the picture shows exactly what the
+run used. Importing them imports Taichi's Python module but never initialises it; the
+service draws in a child process, so the API process still never imports the engine.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .run_data import RunData
+
+
+def metric_edges(pos: np.ndarray, radius: float, inclusive: bool, box: float | None
+                 ) -> np.ndarray:
+    """(E, 2) agent pairs i < j within the radius (minimum image in a periodic box)."""
+    tree = cKDTree(np.mod(pos, box), boxsize=box) if box is not None else cKDTree(pos)
+    pairs = tree.query_pairs(radius, output_type="ndarray")
+    if not inclusive and len(pairs):
+        d = displacement(pos[pairs[:, 0]], pos[pairs[:, 1]], box)
+        pairs = pairs[np.hypot(d[:, 0], d[:, 1]) < radius]
+    return pairs.reshape(-1, 2)
+
+
+def displacement(a: np.ndarray, b: np.ndarray, box: float | None) -> np.ndarray:
+    """b - a, by the minimum image in a periodic box."""
+    d = b - a
+    if box is not None:
+        d -= box * np.round(d / box)
+    return d
+
+
+def interaction_edges(run: RunData, pos: np.ndarray) -> np.ndarray | None:
+    """The graph the model used at this frame, or None when it has none to draw.
+
+    Vicsek and switching flocking: the metric graph of `neighbours` (the paper's
+    inclusive or strict test). Fixed flocking: the run's fixed graph. Obstacles: the metric
+    graph at the initial radius R (the per-agent radii are not recorded; the summary's
+    `adaptive_radius.halvings` says whether any changed). Formation: the repulsion graph
+    |r_ij| < d.
+    """
+    model = run.scenario.model
+    if model.kind == "flocking" and model.topology == "fixed":
+        from kernels.topology import build_edges
+
+        u, v = build_edges(model.graph, run.n_agents, run.scenario.seed)
+        return np.column_stack([u, v]).astype(np.int64)
+    nb = run.scenario.neighbours
+    if nb is None:
+        return None
+    return metric_edges(pos, float(nb.radius), run.scenario.inclusive, run.box)
+
+
+@dataclass
+class Obstacles:
+    points: np.ndarray  # (P, 2)
+    discs: list[tuple[float, float, float]]  # (x, y, radius)
+    destination: tuple[float, float]
+
+
+def obstacles(run: RunData) -> Obstacles | None:
+    model = run.scenario.model
+    if model.kind != "flocking_obstacles":
+        return None
+    return Obstacles(np.asarray(model.obstacles, dtype=np.float64).reshape(-1, 2),
+                     [(d.center[0], d.center[1], d.radius) for d in model.discs],
+                     tuple(model.destination))
+
+
+@dataclass
+class Leaders:
+    """M4's virtual leader p(t), its whole path, and (F1) each agent's r_id = p + b_i."""
+
+    leader: np.ndarray  # (2,)
+    path: np.ndarray  # (K, 2) samples of p over the run
+    targets: np.ndarray | None  # (N, 2) r_id(t) for F1, None for F2
+
+
+def leaders(run: RunData, t: float) -> Leaders | None:
+    model = run.scenario.model
+    if model.kind != "formation":
+        return None
+    from kernels.formation_path import make_path
+
+    obs = run.observables
+    if "leader_x" in obs and len(obs["leader_x"]):
+        start = np.array([obs["leader_x"][0], obs["leader_y"][0]])  # p(0) as the run had it
+    else:
+        start = run.frame(0).position.mean(axis=0)
+    path = make_path(model.path, start)
+    t_end = float(run.scenario.time.steps * run.scenario.time.dt)
+    samples = np.array([path.position(s) for s in np.linspace(0.0, t_end, 400)])
+    targets = None
+    if model.design == "F1":
+        from kernels.formation_schedule import OffsetSchedule
+
+        d = float(run.scenario.neighbours.radius)
+        b = OffsetSchedule(model.formation, model.schedule, run.n_agents, d).at(t)
+        targets = path.position(t)[None, :] + b
+    return Leaders(path.position(t), samples, targets)

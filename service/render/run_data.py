@@ -1,0 +1,219 @@
+"""A run folder (or a sweep folder) read back for drawing: no plotting library here."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from schemas import PeriodicBox, Scenario
+
+from .errors import RenderInputError
+
+
+@dataclass
+class Frame:
+    """One recorded frame in agent-id order."""
+
+    index: int
+    step: int
+    time: float
+    position: np.ndarray  # (N, 2)
+    heading: np.ndarray  # (N,) radians: the recorded heading, else the velocity's angle
+    velocity: np.ndarray | None  # (N, 2) when recorded
+
+
+class RunData:
+    """The artifacts of one run: scenario, summary, observables and recorded frames."""
+
+    def __init__(self, folder: Path):
+        self.folder = Path(folder)
+        for name in ("scenario.json", "summary.json"):
+            if not (self.folder / name).is_file():
+                raise RenderInputError(f"{self.folder} is not a run folder (no {name})")
+        try:
+            self.scenario = Scenario.model_validate_json((self.folder / "scenario.json")
+                                                         .read_text())
+            self.summary: dict[str, Any] = json.loads((self.folder / "summary.json").read_text())
+        except ValueError as exc:
+            raise RenderInputError(f"{self.folder}: unreadable run files: {exc}") from exc
+
+    # -- scenario facts -------------------------------------------------------------------
+
+    @property
+    def n_agents(self) -> int:
+        return self.scenario.n_agents
+
+    @property
+    def kind(self) -> str:
+        return self.scenario.model.kind
+
+    @property
+    def box(self) -> float | None:
+        """L of the periodic box, or None on the plane."""
+        space = self.scenario.space
+        return float(space.L) if isinstance(space, PeriodicBox) else None
+
+    # -- observables ----------------------------------------------------------------------
+
+    @cached_property
+    def observables(self) -> dict[str, np.ndarray]:
+        """Every observable's time series by name (with `step` and `time`)."""
+        path = self.folder / "observables.csv"
+        if not path.is_file():
+            return {}
+        with path.open(newline="") as f:
+            rows = list(csv.reader(f))
+        if not rows:
+            return {}
+        names, values = rows[0], rows[1:]
+        table = np.array([[_number(v) for v in r] for r in values], dtype=np.float64)
+        table = table.reshape(len(values), len(names))
+        return {name: table[:, i] for i, name in enumerate(names)}
+
+    @property
+    def convergence(self) -> dict[str, float]:
+        """{quantity: time after which it stays below tolerance}, converged ones only."""
+        conv = self.summary.get("convergence") or {}
+        return {k: float(v) for k, v in conv.items() if isinstance(v, int | float)}
+
+    # -- frames ---------------------------------------------------------------------------
+
+    @property
+    def trajectory_path(self) -> Path:
+        return self.folder / "trajectory.h5"
+
+    @cached_property
+    def frame_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """(steps, times) of the recorded frames."""
+        if not self.trajectory_path.is_file():
+            return np.zeros(0, np.int64), np.zeros(0)
+        with h5py.File(self.trajectory_path, "r") as f:
+            g = f.get("particles/swarm/position")
+            if g is None:
+                return np.zeros(0, np.int64), np.zeros(0)
+            return g["step"][:], g["time"][:]
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frame_index[0])
+
+    def pick_frame(self, frame: int | None = None, time: float | None = None) -> int:
+        """A frame index from `--frame K` (negative counts from the end) or `--time T`
+        (the last frame at or before T); default the last frame."""
+        n = self.n_frames
+        if n == 0:
+            raise RenderInputError(f"{self.folder.name}: no frames were recorded "
+                                   "(recording.every = 0, or no position array)", status=404)
+        if frame is not None and time is not None:
+            raise RenderInputError("give a frame or a time, not both", loc="time")
+        if time is not None:
+            times = self.frame_index[1]
+            if not math.isfinite(time) or time < times[0]:
+                raise RenderInputError(f"time {time} is before the first frame "
+                                       f"(t = {times[0]:g})", loc="time")
+            return int(np.searchsorted(times, time, side="right") - 1)
+        if frame is None:
+            return n - 1
+        k = frame + n if frame < 0 else frame
+        if not 0 <= k < n:
+            raise RenderInputError(f"frame {frame} out of range: {n} frames recorded "
+                                   f"(0..{n - 1}, or negative from the end)", loc="frame")
+        return k
+
+    def frame(self, k: int) -> Frame:
+        """Frame k (an index from `pick_frame`)."""
+        steps, times = self.frame_index
+        with h5py.File(self.trajectory_path, "r") as f:
+            swarm = f["particles/swarm"]
+            pos = swarm["position/value"][k]
+            vel = swarm["velocity/value"][k] if "velocity" in swarm else None
+            if "heading" in swarm:
+                heading = swarm["heading/value"][k]
+            elif vel is not None:
+                heading = np.arctan2(vel[:, 1], vel[:, 0])
+            else:
+                heading = np.zeros(len(pos))
+        return Frame(k, int(steps[k]), float(times[k]), pos, heading, vel)
+
+    def positions(self, start: int, stop: int, stride: int = 1,
+                  agents: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """Positions of frames start:stop:stride, (F, n, 2), for trails."""
+        with h5py.File(self.trajectory_path, "r") as f:
+            value = f["particles/swarm/position/value"]
+            return np.stack([value[k][agents] for k in range(start, stop, stride)])
+
+
+def _number(s: str) -> float:
+    try:
+        return float(s)
+    except ValueError:
+        return math.nan
+
+
+# -- sweeps -------------------------------------------------------------------------------
+
+
+@dataclass
+class SweepData:
+    """A sweep folder: `table.csv` (axis columns, then <measure>_mean/_sd/_sem/_count)
+    and `sweep.json` (the spec, whose `axes` name the axis paths in order)."""
+
+    folder: Path
+    spec: dict[str, Any]
+    axes: list[str]
+    columns: dict[str, np.ndarray] = field(repr=False)  # numbers (NaN where not one)
+    text: dict[str, list[str]] = field(repr=False)  # the cells as written
+
+    @property
+    def name(self) -> str:
+        for doc in (self.spec, self.spec.get("sweep")):
+            if isinstance(doc, dict) and isinstance(doc.get("name"), str):
+                return doc["name"]
+        return self.folder.name
+
+    @property
+    def measures(self) -> list[str]:
+        return [c.removesuffix("_mean") for c in self.columns if c.endswith("_mean")]
+
+
+def is_sweep_dir(folder: Path) -> bool:
+    return (Path(folder) / "table.csv").is_file() and (Path(folder) / "sweep.json").is_file()
+
+
+def load_sweep(folder: Path) -> SweepData:
+    folder = Path(folder)
+    try:
+        spec = json.loads((folder / "sweep.json").read_text())
+        with (folder / "table.csv").open(newline="") as f:
+            rows = list(csv.reader(f))
+    except (OSError, ValueError) as exc:
+        raise RenderInputError(f"{folder}: unreadable sweep files: {exc}") from exc
+    axes = [_axis_name(a) for a in spec.get("axes", [])] if isinstance(spec, dict) else []
+    if not rows or not axes:
+        raise RenderInputError(f"{folder}: the sweep has no rows or no axes")
+    names = rows[0]
+    missing = [a for a in axes if a not in names]
+    if missing:
+        raise RenderInputError(f"{folder}/table.csv has no column for the axes {missing}")
+    text = {n: [r[i] if i < len(r) else "" for r in rows[1:]] for i, n in enumerate(names)}
+    columns = {n: np.array([_number(v) for v in vals]) for n, vals in text.items()}
+    return SweepData(folder, spec, axes, columns, text)
+
+
+def _axis_name(axis: Any) -> str:
+    """An axis is its path, or an object holding it under `path` (or `name`)."""
+    if isinstance(axis, str):
+        return axis
+    if isinstance(axis, dict):
+        for key in ("path", "name", "field"):
+            if isinstance(axis.get(key), str):
+                return axis[key]
+    raise RenderInputError(f"sweep.json: cannot read the axis {axis!r}")

@@ -1,0 +1,155 @@
+"""The browser viewer in real headless Chromium (Debian's `chromium`, driven by Playwright
+for Python) against a real `flocklab serve` on 127.0.0.1.
+
+Skipped, with the reason, when either is missing. CI installs them with
+`apt-get install -y chromium` and `pip install playwright` (never `playwright install`:
+the browser comes from Debian, not from a download).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import httpx
+import pytest
+
+from .svc_helpers import scenario, submit, wait_for
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+if not Path(CHROMIUM).exists():
+    pytest.skip("no chromium (apt-get install -y chromium)", allow_module_level=True)
+sync_api = pytest.importorskip("playwright.sync_api",
+                               reason="no playwright (pip install playwright)")
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+# FLOCKLAB_DOCS_IMG=docs/img saves the viewer's screenshot for the README.
+DOCS_IMG = os.environ.get("FLOCKLAB_DOCS_IMG")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS, headless=True)
+        yield b
+        b.close()
+
+
+class Watched:
+    """A page whose console errors, page errors and requests are recorded."""
+
+    def __init__(self, browser, url: str):
+        self.page = browser.new_page(viewport={"width": 1280, "height": 900})
+        self.errors: list[str] = []
+        self.hosts: set[str] = set()
+        self.page.on("console", lambda m: self.errors.append(m.text) if m.type == "error"
+                     else None)
+        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
+        self.page.on("request", lambda r: self.hosts.add(urlsplit(r.url).hostname or r.url))
+        self.page.goto(url)
+        self.page.wait_for_selector("#preset option", state="attached")
+
+
+def canvas_ink(page, selector: str = "#canvas") -> float:
+    """Fraction of the canvas's pixels that are not white."""
+    return page.evaluate("""(sel) => {
+        const c = document.querySelector(sel);
+        const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+        let ink = 0;
+        for (let i = 0; i < d.length; i += 4) {
+            if (d[i + 3] > 0 && (d[i] < 230 || d[i + 1] < 230 || d[i + 2] < 230)) ink++;
+        }
+        return ink / (d.length / 4);
+    }""", selector)
+
+
+def test_submit_follow_play_and_validation(browser, server, tmp_path):
+    w = Watched(browser, server.url + "/")
+    page = w.page
+    page.select_option("#preset", "vicsek-1995")
+    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
+    page.fill('#fields .field[data-path="time.steps"] input', "3000")
+    page.click("#submit")
+    page.wait_for_function("() => document.querySelector('#job-id').textContent.length > 30")
+    job_id = page.text_content("#job-id")
+    page.wait_for_selector(f'#jobs tr[data-id="{job_id}"]')  # the job list shows it
+    progress, deadline = [], time.monotonic() + 120
+    while page.text_content("#job-status") != "succeeded":
+        assert time.monotonic() < deadline, page.text_content("#job-status")
+        assert page.text_content("#job-status") not in ("failed", "cancelled", "timed_out")
+        progress.append(float(page.get_attribute("#job-progress", "value") or 0))
+        time.sleep(0.1)
+    progress.append(float(page.evaluate("document.querySelector('#job-progress').value")))
+    assert progress == sorted(progress) and progress[-1] == 1.0
+    assert any(0 < p < 1 for p in progress), progress  # seen part-way, over SSE
+
+    page.wait_for_selector("#play:not([disabled])", timeout=60_000)
+    assert canvas_ink(page) > 0.002
+    page.click("#play")
+    page.wait_for_function("() => Number(document.querySelector('#scrub').value) > 3")
+    page.click("#play")
+    assert canvas_ink(page) > 0.002
+    assert page.locator("#downloads button").count() == 5
+    assert canvas_ink(page, "#plot") > 0.002  # the observables plot
+    if DOCS_IMG:
+        page.evaluate("window.scrollTo(0, 0)")
+        page.screenshot(path=str(Path(DOCS_IMG) / "viewer.png"))
+
+    assert not w.errors, w.errors
+    # a bad field: the server's own message, next to that field (Chromium logs the 422
+    # response itself as a console error; nothing else may appear)
+    bad = scenario(n=50, steps=10, every=5)
+    bad["time"]["dt"] = -1.0
+    expected = httpx.post(f"{server.url}/v1/jobs", json={"scenario": bad}).json()
+    msg = next(e["msg"] for e in expected["errors"] if e["loc"] == "scenario.time.dt")
+    page.fill('#fields .field[data-path="time.dt"] input', "-1")
+    page.click("#submit")
+    row = page.locator('#fields .field[data-path="time.dt"]')
+    row.locator(".field-error").filter(has_text=msg).wait_for()
+    assert "invalid" in (row.get_attribute("class") or "")
+    assert all("status of 422" in e for e in w.errors), w.errors
+    assert w.hosts == {"127.0.0.1"}, w.hosts
+
+
+def test_api_key_is_asked_once_and_kept_in_the_tab(browser, make_server):
+    s = make_server({"FLOCKLAB_API_KEY": "k3y"})
+    page = browser.new_page()
+    page.goto(s.url + "/")
+    page.wait_for_function(
+        "() => document.querySelector('#list-state').textContent.includes('API key')")
+    page.fill("#api-key", "k3y")
+    page.click("#key-form button")
+    page.wait_for_selector("#preset option", state="attached")
+    assert page.evaluate("sessionStorage.getItem('flocklab-api-key')") == "k3y"
+    page.reload()  # the key survives a reload of the tab
+    page.wait_for_selector("#preset option", state="attached")
+    assert page.text_content("#list-state") == ""
+
+
+def test_playback_rate_at_ten_thousand_agents(browser, make_server, capsys):
+    """Reported, not asserted: frames drawn per second at N = 10^4 (the bar: >= 20)."""
+    s = make_server({"FLOCKLAB_MAX_AGENTS": "20000",
+                     "FLOCKLAB_MAX_TRAJECTORY_BYTES": str(256 * 2**20),
+                     "FLOCKLAB_MAX_BODY_BYTES": str(2**20)})
+    with httpx.Client(base_url=s.url, timeout=60) as http:
+        sc = scenario(n=10_000, steps=60, every=2)
+        sc["space"]["L"] = 50.0
+        job = submit(http, sc)
+        assert wait_for(http, job["id"], timeout=240)["status"] == "succeeded"
+    w = Watched(browser, s.url + "/")
+    w.page.evaluate("(id) => window.flocklabViewer.selectJob(id)", job["id"])
+    w.page.wait_for_selector("#play:not([disabled])", timeout=120_000)
+    fps = w.page.evaluate("() => window.flocklabViewer.measurePlayback(100)")
+    w.page.select_option("#speed", "4")  # 80 recorded frames a second asked for
+    w.page.click("#play")
+    time.sleep(2)
+    live = w.page.text_content("#fps")
+    w.page.click("#play")
+    with capsys.disabled():
+        print(f"\nviewer playback at N = 10^4: {fps:.1f} frames/s drawn back to back; "
+              f"live counter {live}")
+    assert fps > 0 and canvas_ink(w.page) > 0.002
+    assert not w.errors, w.errors

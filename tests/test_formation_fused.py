@@ -1,0 +1,212 @@
+"""M4 on the fused small-N path: a replica gives the same bits alone, in a batch, cut into
+any windows, and the same prefix when cancelled; the engine picks the path from the
+scenario alone. (The plane is M4's only space.)"""
+
+import numpy as np
+import pytest
+
+import kernels
+from kernels import engine
+from kernels.formation_fused import MAX_N, FormationBatch
+from tests.test_formation import STRAIGHT, explicit, scenario
+
+SPLINE = {"kind": "spline", "waypoints": [[0.0, 60.0], [-50.0, 50.0]], "arrival_time": 2.0}
+# A mix a sweep would batch together: designs, gains, paths, schedules, N, steps, seeds.
+MIX = [
+    (dict(attraction={"kind": "linear", "k": 1.5}, path=STRAIGHT,
+          formation=explicit("wedge", 10),
+          schedule=[{"start": 0.1, "end": 0.3, "rotate": 2.0}]), dict(N=10, steps=40)),
+    (dict(attraction={"kind": "quadratic", "c": 0.05},
+          repulsion={"kind": "inverse_square", "k_g": 400.0}, path=SPLINE,
+          formation={"kind": "named", "shape": "circle"},
+          schedule=[{"start": 0.0, "end": 0.2, "formation": explicit("hex", 12, 0.4),
+                     "relaxation": "linear"}]), dict(N=12, steps=33, seed=2)),
+    (dict(design="F2", attraction={"kind": "saturating", "k": 2.0, "v_max": 9.0},
+          path={"kind": "straight", "target": [10.0, 12.0], "arrival_time": 4.0}),
+     dict(N=30, steps=25, seed=3, obs_every=4, inclusive=True)),
+    (dict(design="F2", path=SPLINE), dict(N=7, steps=40, seed=4, obs_every=3)),
+]
+
+
+def same_result(a, b):
+    assert a.status == b.status and a.steps == b.steps
+    assert a.observables.keys() == b.observables.keys()
+    for k in a.observables:
+        assert np.array_equal(a.observables[k], b.observables[k]), k
+    assert a.extra["dense_regime"] == b.extra["dense_regime"]
+
+
+class Frames:
+    def __init__(self):
+        self.steps, self.frames = [], []
+
+    def frame(self, step, time, arrays):
+        self.steps.append(step)
+        self.frames.append(arrays)
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk4"])
+def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, fixed_windows, integrator):
+    scenarios = [scenario(dict(m, integrator=integrator), every=0, **kw) for m, kw in MIX]
+    together = kernels.run_batch(scenarios)
+    assert len(engine._batches(scenarios)) == 1  # one launch for all four
+    alone = [kernels.run(sc) for sc in scenarios]
+    # And in windows of 7 steps, some replicas ending before the others.
+    fixed_windows(59 * 7)
+    cut = kernels.run_batch(scenarios)
+    for res, res_cut, ref in zip(together, cut, alone, strict=True):
+        assert res.extra["engine_path"] == "fused"
+        assert res.status == "completed", res.error
+        same_result(res, ref)
+        same_result(res_cut, ref)
+
+
+def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, fixed_windows):
+    m, kw = MIX[1]
+    arrays = ("position", "velocity")
+    whole = kernels.run(scenario(m, every=0, **kw))
+    sink = Frames()
+    framed = kernels.run(scenario(m, every=7, arrays=arrays, **kw), sink=sink)
+    assert sink.steps == [*range(0, 33, 7), 33]
+    fixed_windows(12 * 3)  # windows of 3 steps
+    cut = kernels.run(scenario(m, every=0, **kw))
+    cut_sink = Frames()
+    kernels.run(scenario(m, every=7, arrays=arrays, **kw), sink=cut_sink)
+    same_result(whole, framed)
+    same_result(whole, cut)
+    assert cut_sink.steps == sink.steps
+    for a, b in zip(sink.frames, cut_sink.frames, strict=True):
+        for k in arrays:
+            assert np.array_equal(a[k], b[k]), k
+    # The last frame's velocity is the rate of the last state (the observation's speeds).
+    v = sink.frames[-1]["velocity"]
+    assert np.hypot(*v.T).max() == pytest.approx(whole.final["speed_max"], rel=1e-12)
+
+
+def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, fixed_windows):
+    m, kw = MIX[0]
+    sc = scenario(m, every=0, **kw)
+    whole = kernels.run(sc)
+    fixed_windows(10 * 10)  # windows of 10 steps
+    polls = iter([False, True])
+    part = kernels.run(sc, should_stop=lambda: next(polls))
+    assert part.status == "cancelled" and part.steps == 20
+    assert np.array_equal(part.observables["step"], np.arange(21))
+    for k in whole.observables:
+        assert np.array_equal(part.observables[k], whole.observables[k][:21]), k
+
+
+def test_divergence_stops_only_its_replica(taichi_cpu):
+    good = scenario(*MIX[0][:1], every=0, **MIX[0][1])
+    same = scenario({"design": "F2", "path": STRAIGHT}, every=0,
+                    positions=[[0.0, 0.0], [0.0, 0.0], [5.0, 1.0]])
+    huge = scenario({"design": "F2", "path": STRAIGHT, "attraction": {"kind": "quadratic"}},
+                    N=30, dt=1e6, steps=50, every=0)
+    res = kernels.run_batch([good, same, huge])
+    assert [r.extra["engine_path"] for r in res] == ["fused"] * 3
+    assert res[0].status == "completed" and res[0].steps == 40
+    same_result(res[0], kernels.run(good))
+    assert res[1].status == "diverged" and res[1].error["step"] == 0 == res[1].steps
+    assert "same position" in res[1].error["cause"]
+    assert res[2].status == "diverged" and 0 < res[2].steps < 50
+    assert res[2].error["step"] == res[2].steps and "spans" in res[2].error["cause"]
+    # The stopping state is not observed: the runaway check comes first, as on the
+    # per-step path (its grid refuses to bucket the swarm).
+    assert len(res[2].observables["step"]) == res[2].steps
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk4"])
+@pytest.mark.parametrize("case", ["runaway", "coincident"])
+def test_divergence_has_the_per_step_step_and_cause(taichi_cpu, monkeypatch, integrator,
+                                                    case):
+    if case == "runaway":
+        m, kw = {"design": "F2", "path": STRAIGHT}, dict(N=30, dt=1e3, steps=20)
+    else:
+        m, kw = {"design": "F2", "path": STRAIGHT}, dict(
+            positions=[[0.0, 0.0], [3.0, 0.0], [3.0, 0.0]], steps=20)
+    sc = scenario(dict(m, integrator=integrator), every=0, **kw)
+    fused = kernels.run(sc)
+    monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+    per_step = kernels.run(sc)
+    assert (fused.extra["engine_path"], per_step.extra["engine_path"]) == ("fused",
+                                                                         "per_step")
+    assert fused.status == per_step.status == "diverged"
+    assert fused.error == per_step.error
+    assert fused.steps == per_step.steps
+    assert np.array_equal(fused.observables["step"], per_step.observables["step"])
+
+
+def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
+    m = {"design": "F2", "path": STRAIGHT}
+    assert FormationBatch.batch_key(scenario(m, N=113)) is not None  # 9 N <= 1024: exact
+    assert FormationBatch.batch_key(scenario(m, N=114)) is None  # the dense regime may act
+    exact = dict(m, max_exact_candidates=None)
+    assert FormationBatch.batch_key(scenario(exact, N=MAX_N)) is not None
+    assert FormationBatch.batch_key(scenario(exact, N=MAX_N + 1)) is None
+    assert FormationBatch.batch_key(scenario(m, N=1)) is None
+    small = scenario(m, N=20, steps=2)
+    assert engine.fused_batch(small, "cpu") is FormationBatch
+    assert engine.fused_batch(small, "cuda") is None
+    assert kernels.run(scenario(m, N=114, steps=2)).extra["engine_path"] == "per_step"
+
+
+def test_the_spline_table_is_the_scalar_path():
+    """The vectorised arc-length inversion the fused path tabulates p(t) and q(t) with
+    gives the scalar solver's values (to its tolerance), before and after the arrival."""
+    from kernels.formation_path import SplineTable, make_path
+    from schemas.formation import SplinePath
+
+    spline = make_path(SplinePath.model_validate(SPLINE), np.array([25.0, 25.0]))
+    t = np.linspace(0.0, 2.5, 601)  # arrival at 2.0
+    table = SplineTable(spline)
+    want_q = np.arange(len(t)) % 3 == 0
+    pq = table.at(t, want_q)
+    p, q = pq[:, :2], pq[want_q, 2:]
+    np.testing.assert_allclose(p, [spline.position(x) for x in t], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(q, [spline.velocity(x) for x in t[want_q]], rtol=0,
+                               atol=1e-11)
+    assert np.all(pq[~want_q, 2:] == 0.0)
+    assert np.all(q[t[want_q] >= 2.0] == 0.0) and np.hypot(*q[t[want_q] < 2.0].T).min() > 1
+    # Row by row the same bits however the times are cut (the windows of a run).
+    cut = np.concatenate([table.at(t[:7], want_q[:7]), table.at(t[7:300], want_q[7:300]),
+                          table.at(t[300:], want_q[300:])])
+    assert np.array_equal(cut, pq)
+
+
+SCHEDULE = [  # rotate, morph, an abrupt rotation, morph (linear), rotate (linear)
+    {"start": 0.05, "end": 0.1, "rotate": 1.0},
+    {"start": 0.12, "end": 0.2, "formation": {"kind": "named", "shape": "hex",
+                                              "orientation": 0.3}},
+    {"start": 0.2, "end": 0.2, "rotate": -0.5},
+    {"start": 0.25, "end": 0.3, "formation": explicit("line", 9), "relaxation": "linear"},
+    {"start": 0.31, "end": 0.35, "rotate": 2.0, "relaxation": "linear"},
+]
+
+
+@pytest.mark.parametrize("integrator, path", [("euler", STRAIGHT), ("rk4", SPLINE)],
+                         ids=["euler-straight", "rk4-spline"])
+def test_both_paths_agree_through_a_chain_of_formation_changes(taichi_cpu, monkeypatch,
+                                                              integrator, path):
+    """The in-kernel schedule (which stored formation, which weights, at every stage time)
+    against the per-step path's host schedule, frames and every observable."""
+    m = dict(path=path, formation={"kind": "named", "shape": "wedge"}, schedule=SCHEDULE,
+             integrator=integrator)
+    sc = scenario(m, N=9, steps=40, every=8, arrays=("position", "velocity"), obs_every=3)
+    runs = {}
+    for name in ("fused", "per_step"):
+        if name == "per_step":
+            monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+        sink = Frames()
+        res = kernels.run(sc, sink=sink)
+        assert res.extra["engine_path"] == name and res.status == "completed"
+        runs[name] = res, sink
+    (a, fa), (b, fb) = runs["fused"], runs["per_step"]
+    assert a.observables.keys() == b.observables.keys()
+    for k in a.observables:
+        np.testing.assert_allclose(a.observables[k], b.observables[k], rtol=1e-12,
+                                   atol=1e-12, err_msg=k)
+    assert fa.steps == fb.steps == [*range(0, 40, 8), 40]
+    for x, y in zip(fa.frames, fb.frames, strict=True):
+        for k in x:
+            np.testing.assert_allclose(x[k], y[k], rtol=1e-12, atol=1e-11, err_msg=k)
+    assert a.observables["formation_error_max"].max() > 1.0  # the changes do show
