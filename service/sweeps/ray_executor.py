@@ -42,6 +42,7 @@ if TYPE_CHECKING:
 CONNECT_SECONDS = 5.0  # a cluster address that does not accept a connection in this is down
 WAIT_SECONDS = 0.2  # how often should_stop is asked while tasks run
 HEALTH_SECONDS = 5.0  # silence after which the driver checks that the cluster is there
+PROBE_COPIES = 64  # at most this many workers are warmed by the probe (see probe)
 CHUNKS_PER_CPU = 4  # a sweep is cut into about this many tasks per cluster CPU
 
 _connected: str | None = None  # the address this process's driver is connected to
@@ -156,13 +157,16 @@ class RayExecutor:
                 max_retries=1, retry_exceptions=False, max_calls=self.config.max_calls)(fn)
         return self._remote[fn.__name__]
 
+    def slots(self) -> int:
+        """Tasks the cluster runs at once: its CPUs over the threads of a task."""
+        ray = connect(self.address)
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        return max(1, cpus // max(1, self.config.threads))
+
     def chunk_size(self, n_runs: int) -> int:
         """Runs per task: enough tasks to keep every CPU busy and the progress moving,
         at most BATCH_RUNS (the engine's batch, which bounds a task's memory)."""
-        ray = connect(self.address)
-        cpus = int(ray.cluster_resources().get("CPU", 1))
-        slots = max(1, cpus // max(1, self.config.threads))
-        return max(1, min(BATCH_RUNS, math.ceil(n_runs / (CHUNKS_PER_CPU * slots))))
+        return max(1, min(BATCH_RUNS, math.ceil(n_runs / (CHUNKS_PER_CPU * self.slots()))))
 
     # -- the Executor protocol ------------------------------------------------------------
 
@@ -186,11 +190,16 @@ class RayExecutor:
         self._drive(pending, done, should_stop)
 
     def probe(self, scenario: Scenario) -> RunResult:
+        """The probe runs on every slot of the cluster at once and the first answer is
+        used: the copies start a worker process per CPU (Taichi initialised, the
+        scenario's kernels loaded) while the first answers, instead of each worker
+        starting only when the sweep's tasks reach it (a new driver gets new workers)."""
         task = self._task(ray_tasks.probe)
-        ref = task.options(**_resources([scenario], self.config.threads)).remote(
-            scenario, self.config.threads)
+        opts = _resources([scenario], self.config.threads)
+        refs = [task.options(**opts).remote(scenario, self.config.threads)
+                for _ in range(min(self.slots(), PROBE_COPIES))]
         got: list[RunResult] = []
-        self._drive({ref: None}, lambda _, value: got.append(value), lambda: False)
+        self._drive({refs[0]: None}, lambda _, value: got.append(value), lambda: False)
         return got[0]
 
     def run_job(self, scenario: Scenario, out_dir: Path, *,
