@@ -125,7 +125,7 @@ def test_ctrl_c_cancels_the_outstanding_tasks_and_resume_finishes(
 
 def test_a_killed_ray_worker_is_retried_and_no_run_counted_twice(
         ray_cluster: LocalRayCluster, tmp_path: Path):
-    doc = sweep_doc(steps=3000, n=100, etas=(0.5, 2.0), replicas=2)
+    doc = sweep_doc(steps=1500, n=400, etas=(0.5, 2.0), replicas=2)
     spec, out = write(tmp_path, doc), tmp_path / "out"
     proc = subprocess.Popen(sweep_cmd(spec, out, ray_cluster.address),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -154,14 +154,15 @@ def test_an_unreachable_cluster_is_a_clear_error_naming_the_address(tmp_path: Pa
 
 def test_the_second_node_killed_its_tasks_rerun_on_the_head(ray_cluster: LocalRayCluster,
                                                            tmp_path: Path):
-    doc = sweep_doc(steps=3000, n=100, etas=(0.5, 1.0, 2.0, 4.0), replicas=2)
+    doc = sweep_doc(steps=2000, n=400, etas=(0.5, 1.0, 2.0, 4.0), replicas=2)
     spec, out = write(tmp_path, doc), tmp_path / "out"
     proc = subprocess.Popen(sweep_cmd(spec, out, ray_cluster.address),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 90
     while not set(ray_cluster.second_node_pids()) & set(ray_cluster.pids("ray::run_chunk")):
-        assert time.monotonic() < deadline, "no task ran on the second node"
-        time.sleep(0.1)
+        assert time.monotonic() < deadline and proc.poll() is None, \
+            "no task was seen on the second node while the sweep ran"
+        time.sleep(0.05)
     try:
         for pid in ray_cluster.second_node_pids():
             os.kill(pid, signal.SIGKILL)
