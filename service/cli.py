@@ -174,6 +174,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         shutil.rmtree(out)
     from kernels import BackendUnavailable
 
+    from .sweeps.executors import ExecutorConfig, make_executor
+    from .sweeps.ray_executor import ClusterError
     from .sweeps.runner import SweepFolderConflict, run_sweep
 
     show = sys.stderr.isatty() and not args.quiet
@@ -182,7 +184,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         with stop:
-            outcome = run_sweep(sweep, out, should_stop=stop,
+            executor = make_executor(ExecutorConfig(
+                kind=args.executor, ray_address=args.ray_address, threads=args.ray_threads))
+            outcome = run_sweep(sweep, out, should_stop=stop, executor=executor,
                                 on_progress=lambda p: bar(p.runs_done + p.runs_failed,
                                                           p.runs_total))
     except SweepFolderConflict as exc:
@@ -191,7 +195,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise BadInput(_problems(args.sweep, exc.errors)) from exc
     except OSError as exc:  # an unwritable or full output folder
         raise BadInput(f"cannot write the sweep into {out}: {exc.strerror or exc}") from exc
-    except BackendUnavailable as exc:
+    except (BackendUnavailable, ClusterError) as exc:  # the finished runs are kept
         print(f"flocklab: {exc}", file=sys.stderr)
         return EXIT_BACKEND
     print(json.dumps({"out": str(out), "status": outcome.status,
@@ -336,6 +340,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true",
                    help="discard a sweep folder's finished runs and start afresh")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--executor", choices=["local", "ray"], default="local",
+                   help="where the runs execute: this process, or tasks on a Ray cluster")
+    p.add_argument("--ray-address", default="auto", metavar="ADDR",
+                   help="the Ray cluster: 'auto', host:port or ray://host:port (default auto)")
+    p.add_argument("--ray-threads", type=int, default=1, metavar="T",
+                   help="CPU threads (num_cpus) per Ray task for runs that name none")
     p.set_defaults(fn=cmd_sweep)
     p = sub.add_parser("validate", help="check a scenario or a sweep; report every problem")
     p.add_argument("scenario", help="scenario or sweep JSON file, '-' for stdin, or "

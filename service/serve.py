@@ -25,6 +25,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data-dir", type=Path, help="Job store and results folder.")
     p.add_argument("--workers", type=int, help="Worker processes (jobs run at once).")
     p.add_argument("--settings", type=Path, help="Settings file (dotenv: FLOCKLAB_X=value).")
+    p.add_argument("--executor", choices=["local", "ray"],
+                   help="Run jobs and sweeps in local workers or as tasks on a Ray cluster.")
+    p.add_argument("--ray-address", metavar="ADDR",
+                   help="The Ray cluster (auto, host:port, ray://host:port).")
     p.add_argument("--log-level", default="info",
                    choices=["critical", "error", "warning", "info", "debug"])
     return p
@@ -45,7 +49,9 @@ def cli_main(argv: list[str]) -> int:
     )
     from service.jobs import data_dir_locked
 
-    overrides = {k: v for k, v in (("data_dir", args.data_dir), ("workers", args.workers))
+    overrides = {k: v for k, v in (("data_dir", args.data_dir), ("workers", args.workers),
+                                   ("executor", args.executor),
+                                   ("ray_address", args.ray_address))
                  if v is not None}
     try:
         settings = load_settings(args.settings, **overrides)

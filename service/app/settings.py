@@ -10,11 +10,13 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+from typing import Literal
 
 from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.jobs import Limits, SupervisorConfig
+from service.sweeps.executors import ExecutorConfig
 
 MiB = 2**20
 GiB = 2**30
@@ -80,6 +82,15 @@ class Settings(BaseSettings):
         default=None, description="When set, every route but /healthz needs it.")
     cors_origins: list[str] = Field(default_factory=list,
                                     description="Allowed CORS origins (JSON list); none: off.")
+    executor: Literal["local", "ray"] = Field(
+        default="local", description="Where jobs and sweeps run: the worker processes, or "
+        "Ray tasks on the cluster at ray_address (the workers then only drive them).")
+    ray_address: str = Field(default="auto",
+                             description="The Ray cluster: auto, host:port or ray://host:port.")
+    ray_threads: int = Field(default=1, ge=1,
+                             description="CPU threads (num_cpus) of a Ray task.")
+    ray_max_calls: int = Field(default=20, ge=1,
+                               description="Tasks a Ray worker process runs before recycling.")
     # Hardening (docs/SERVICE_HARDENING.md).
     min_free_disk_bytes: int = Field(
         default=256 * MiB, ge=0, description="Free space the data disk keeps: below it, "
@@ -119,9 +130,18 @@ class Settings(BaseSettings):
             result_ttl_seconds=self.result_ttl_seconds,
             worker_max_jobs=self.worker_max_jobs,
             worker_max_rss_bytes=self.worker_max_rss_bytes,
-            warmup_preset=self.warmup_preset or None,
+            # With Ray the workers are drivers: Taichi runs on the cluster, never here.
+            warmup_preset=(self.warmup_preset or None) if self.executor == "local" else None,
+            executor=self.executor_config(),
             min_free_bytes=self.min_free_disk_bytes,
         )
+
+    def executor_config(self) -> ExecutorConfig:
+        return ExecutorConfig(kind=self.executor, ray_address=self.ray_address,
+                              threads=self.ray_threads, max_calls=self.ray_max_calls,
+                              # Half the supervisor's grace: the driver force-cancels its
+                              # tasks before the supervisor would kill the driver.
+                              cancel_grace_seconds=self.cancel_grace_seconds / 2)
 
 
 def load_settings(settings_file: str | Path | None = None, **overrides: object) -> Settings:

@@ -28,6 +28,7 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any
 
+from ..sweeps.executors import ExecutorConfig
 from .disk import free_bytes
 from .limits import Limits
 from .problems import problem
@@ -58,6 +59,7 @@ class SupervisorConfig:
     worker_max_jobs: int = 500
     worker_max_rss_bytes: int = 0
     warmup_preset: str | None = None
+    executor: ExecutorConfig = field(default_factory=ExecutorConfig)
     # Jobs wait in the queue while the results disk has less free space than this.
     min_free_bytes: int = 0
 
@@ -338,6 +340,7 @@ class Supervisor:
             "out_dir": str(out_dir),
             "limits": self.config.limits.to_dict(),
             "threads": self.config.threads_per_worker,
+            "executor": self.config.executor.to_dict(),
         }
         # If the worker just died, _poll sees it and re-queues the attempt.
         with contextlib.suppress(OSError):

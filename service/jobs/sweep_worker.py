@@ -60,12 +60,20 @@ def run_sweep_order(order: dict[str, Any], conn: Connection,
             conn.send(("progress", token, int(p.runs_done + p.runs_failed),
                        int(p.runs_total), int(p.runs_failed)))
 
+    from service.sweeps.executors import make_executor
+    from service.sweeps.ray_executor import ClusterError
+
+    from .worker import cluster_problem
+
     out_dir = Path(order["out_dir"])
     try:
-        outcome = run_sweep(sweep, out_dir, on_progress=on_progress, should_stop=should_stop)
+        outcome = run_sweep(sweep, out_dir, on_progress=on_progress, should_stop=should_stop,
+                            executor=make_executor(order.get("executor")))
     except BackendUnavailable as exc:
         return {"problem": problem("backend-unavailable", "Backend unavailable", 503,
                                    str(exc))}
+    except ClusterError as exc:  # unreachable, or lost mid-sweep: finished runs are kept
+        return {"problem": cluster_problem(exc)}
     except SweepError as exc:  # e.g. a measure's observable the model does not have
         return {"problem": problem("invalid-sweep", "Invalid sweep", 422, str(exc),
                                    errors=[e.model_dump() for e in exc.errors])}

@@ -72,7 +72,7 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
 
             outcome = run_sweep_order(order, conn, should_stop)
         else:
-            outcome = _run_order(execute_to_dir, order, on_progress, should_stop)
+            outcome = _run_order(order, on_progress, should_stop)
         outcome["rss"] = _rss_bytes()
         try:
             conn.send(("result", token, outcome))
@@ -80,8 +80,7 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
             return
 
 
-def _run_order(execute_to_dir: Any, order: dict[str, Any], on_progress: Any, should_stop: Any
-               ) -> dict[str, Any]:
+def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dict[str, Any]:
     """Re-validate and run one attempt; every failure becomes a problem body."""
     from pydantic import ValidationError
 
@@ -98,14 +97,22 @@ def _run_order(execute_to_dir: Any, order: dict[str, Any], on_progress: Any, sho
     if errors:
         return {"problem": problem("limit-exceeded", "Over this service's limits", 422,
                                    errors[0].msg, errors=[e.model_dump() for e in errors])}
-    scenario, notes = _fit_threads(scenario, order.get("threads"))
+    from service.sweeps.executors import make_executor
+    from service.sweeps.ray_executor import ClusterError
+
+    executor = make_executor(order.get("executor"))
+    on_ray = (order.get("executor") or {}).get("kind") == "ray"
+    # A Ray task gets its own threads: the CPUs it reserved on the cluster.
+    scenario, notes = _fit_threads(scenario, None if on_ray else order.get("threads"))
     out_dir = Path(order["out_dir"])
     try:
-        summary = execute_to_dir(scenario, out_dir, on_progress=on_progress,
-                                 should_stop=should_stop)
+        summary = executor.run_job(scenario, out_dir, on_progress=on_progress,
+                                   should_stop=should_stop)
     except BackendUnavailable as exc:
         return {"problem": problem("backend-unavailable", "Backend unavailable", 503,
                                    scrub_paths(str(exc)), backend=scenario.backend)}
+    except ClusterError as exc:
+        return {"problem": cluster_problem(exc)}
     except Exception as exc:  # an engine bug must fail this job, not the worker
         log.error("job %s failed:\n%s", order["job_id"], traceback.format_exc())
         if is_disk_full(exc):
@@ -113,6 +120,8 @@ def _run_order(execute_to_dir: Any, order: dict[str, Any], on_progress: Any, sho
         # The message may name files under the data directory: clients never see paths.
         return {"problem": problem("internal-error", "Internal error", 500,
                                    scrub_paths(f"{type(exc).__name__}: {exc}"))}
+    if not (out_dir / "summary.json").exists():  # a job cancelled on Ray left no folder
+        return {"summary": summary, "checksums": {}}
     if scenario.backend == "auto":
         ran = summary.get("backend")
         notes.append(f"backend 'auto' ran on {ran!r}" + (
@@ -126,6 +135,16 @@ def _run_order(execute_to_dir: Any, order: dict[str, Any], on_progress: Any, sho
             return {"problem": problem("internal-error", "Internal error", 500,
                                        scrub_paths(f"{type(exc).__name__}: {exc}"))}
     return {"summary": summary, "checksums": checksums(out_dir)}
+
+
+def cluster_problem(exc: Any) -> dict[str, Any]:
+    """The problem body of a ClusterError (cluster unreachable, or lost mid-job)."""
+    from service.sweeps.ray_executor import ClusterUnavailable
+
+    slug, title = (("cluster-unavailable", "Ray cluster unavailable")
+                   if isinstance(exc, ClusterUnavailable) else
+                   ("cluster-task-lost", "Ray task lost"))
+    return problem(slug, title, 503, str(exc), ray_address=exc.address)
 
 
 def _fit_threads(scenario: Any, allowed: int | None) -> tuple[Any, list[str]]:

@@ -11,19 +11,19 @@ The folder:
 Running the same sweep into the same folder again resumes it: runs found in the journal
 are not redone. A folder holding a different sweep is refused (SweepFolderConflict).
 
-The engine is reached through `kernels.run_batch` (BATCH_RUNS consecutive runs at a time,
-so memory stays bounded however many runs a sweep has), or, for keep = all, through
-`service.execute.execute_to_dir` one run at a time (frames need a sink); both give the
-same bits as `kernels.run` of the run's scenario alone. Importing this module does not
-import the engine.
+The runs execute through an executor (executors.py): by default in this process, through
+`kernels.run_batch` (BATCH_RUNS consecutive runs at a time, so memory stays bounded however
+many runs a sweep has), or, for keep = all, through `service.execute.execute_to_dir` one
+run at a time (frames need a sink); or as tasks on a Ray cluster (ray_executor.py). Every
+way gives the same bits as `kernels.run` of the run's scenario alone, and whatever runs
+where, only this process records results (journal, summaries, tables). Importing this
+module does not import the engine.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,7 +35,8 @@ from pydantic import ValidationError
 from schemas import FieldError, Scenario
 from schemas.sweep import Sweep, SweepError, SweepRun
 
-from ..execute import execute_to_dir, run_summary
+from ..execute import run_summary
+from .executors import Executor, LocalExecutor
 from .journal import Journal, read_journal
 from .measures import reduce_run
 from .tables import SWEEP_FILE, atomic_write, axis_columns, write_tables
@@ -43,9 +44,6 @@ from .tables import SWEEP_FILE, atomic_write, axis_columns, write_tables
 if TYPE_CHECKING:
     from kernels import RunResult
 
-# Runs handed to the engine at once (the batch it may fuse into one launch); smaller
-# batches report and resume at a finer grain. FLOCKLAB_SWEEP_BATCH_RUNS sets it.
-BATCH_RUNS = max(1, int(os.environ.get("FLOCKLAB_SWEEP_BATCH_RUNS", "64")))
 TABLE_INTERVAL = 10.0  # least seconds between table rewrites while a sweep runs
 
 
@@ -83,8 +81,10 @@ def run_sweep(
     *,
     on_progress: Callable[[SweepProgress], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
+    executor: Executor | None = None,
 ) -> SweepOutcome:
-    """Run every run of `sweep` not yet finished in `out_dir`, writing the tables.
+    """Run every run of `sweep` not yet finished in `out_dir`, writing the tables; the
+    runs execute through `executor` (default: in this process).
 
     Raises SweepError (before any run) for an invalid sweep or an observable the model
     does not have, SweepFolderConflict for a folder holding something else; engine errors
@@ -97,8 +97,9 @@ def run_sweep(
         if resuming else {}
     resumed = len(records)
     pending = [r for r in runs if r.index not in records]
+    executor = executor or LocalExecutor()
     if pending:  # before the folder is made: a fixed sweep file is then no "other sweep"
-        _check_observables(sweep, pending[0])
+        _check_observables(sweep, pending[0], executor)
     if not resuming:
         _create_folder(out_dir, sweep, runs)
     state = _State(sweep, runs, out_dir, records, on_progress)
@@ -109,10 +110,8 @@ def run_sweep(
 
     journal = Journal(out_dir)
     try:
-        if sweep.keep == "all":
-            _run_with_artifacts(pending, state, journal, stop, should_stop)
-        else:
-            _run_batched(pending, state, journal, stop, should_stop)
+        executor.run_sweep_runs(pending, sweep.keep, out_dir,
+                                lambda run, result: state.finish(run, result, journal), stop)
     finally:
         journal.close()
         state.write_tables()
@@ -170,39 +169,6 @@ class _State:
         self.table_interval = max(TABLE_INTERVAL, 10 * (self.last_tables - t0))
 
 
-def _run_batched(pending: list[SweepRun], state: _State, journal: Journal,
-                 stop: Callable[[], bool], should_stop: Callable[[], bool] | None) -> None:
-    import kernels
-
-    for start in range(0, len(pending), BATCH_RUNS):
-        if stop():
-            return
-        chunk = pending[start:start + BATCH_RUNS]
-
-        def on_result(i: int, result: RunResult, chunk: list[SweepRun] = chunk) -> None:
-            if result.status != "cancelled":  # a cancelled run is redone on resume
-                state.finish(chunk[i], result, journal)
-
-        kernels.run_batch([r.scenario for r in chunk], on_result=on_result,
-                          should_stop=should_stop)
-
-
-def _run_with_artifacts(pending: list[SweepRun], state: _State, journal: Journal,
-                        stop: Callable[[], bool],
-                        should_stop: Callable[[], bool] | None) -> None:
-    for run in pending:
-        if stop():
-            return
-        folder = state.out_dir / "runs" / str(run.index)
-        got: list[RunResult] = []
-        execute_to_dir(run.scenario, folder, should_stop=should_stop, overwrite=True,
-                       on_result=got.append)
-        if got[0].status == "cancelled":
-            shutil.rmtree(folder, ignore_errors=True)
-            return
-        state.finish(run, got[0], journal)
-
-
 def _record(sweep: Sweep, run: SweepRun, result: RunResult) -> dict[str, Any]:
     """The journal record of a finished run (measures None for a diverged run)."""
     obs = result.observables
@@ -239,12 +205,11 @@ def _require_observables(sweep: Sweep, run: SweepRun, obs: dict[str, Any]) -> No
         raise SweepError(errors)
 
 
-def _check_observables(sweep: Sweep, first: SweepRun) -> None:
+def _check_observables(sweep: Sweep, first: SweepRun, executor: Executor) -> None:
     """Before any run: a one-step run of the first scenario shows which observables the
     model has, so a misspelt observable fails now, not after the first full run."""
     if not sweep.measure and not sweep.series:
         return
-    import kernels
 
     doc = first.scenario.model_dump(mode="json")
     doc["time"]["steps"] = 1
@@ -253,7 +218,7 @@ def _check_observables(sweep: Sweep, first: SweepRun) -> None:
         probe = Scenario.model_validate(doc)
     except ValidationError:
         return  # a model that needs more steps: checked on the first result instead
-    _require_observables(sweep, first, kernels.run(probe).observables)
+    _require_observables(sweep, first, executor.probe(probe).observables)
 
 
 def _check_folder(out_dir: Path, sweep: Sweep) -> bool:

@@ -1,0 +1,144 @@
+"""Where a sweep's runs (and the service's jobs) execute: this process, or a Ray cluster.
+
+An executor takes the pending runs of a sweep and calls `on_result(run, result)` for
+each run that finished (completed or diverged), in any order; the runner records it (the
+journal, the tables), so recording never depends on where a run ran. Runs stopped by
+`should_stop` are not reported: they are redone on resume. Both executors give the same
+bits for a run: each run's result is `kernels.run` of its scenario alone, wherever it ran.
+
+- `LocalExecutor`: `kernels.run_batch` in this process (the CLI's and a service worker's
+  behaviour before Ray existed).
+- `RayExecutor` (ray_executor.py): batches of runs as Ray tasks on a cluster; this
+  process is only the driver and never initialises Taichi.
+
+`make_executor(config)` picks one; importing this module imports neither Taichi nor Ray.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, Protocol
+
+from schemas import Scenario
+from schemas.sweep import SweepRun
+
+from ..execute import execute_to_dir
+
+if TYPE_CHECKING:
+    from kernels import RunResult
+
+# Runs handed to the engine at once (the batch it may fuse into one launch); smaller
+# batches report and resume at a finer grain. FLOCKLAB_SWEEP_BATCH_RUNS sets it.
+BATCH_RUNS = max(1, int(os.environ.get("FLOCKLAB_SWEEP_BATCH_RUNS", "64")))
+
+ResultFn = Callable[[SweepRun, "RunResult"], None]
+StopFn = Callable[[], bool]
+
+
+@dataclass(frozen=True)
+class ExecutorConfig:
+    """How to execute: `kind` "local" or "ray"; for Ray the cluster `ray_address`
+    ("auto", "host:port" or "ray://host:port"), the CPU threads of each task (a run's own
+    `threads` wins), the tasks a Ray worker process runs before it is recycled, and the
+    seconds a cancelled task gets to stop before it is killed."""
+
+    kind: Literal["local", "ray"] = "local"
+    ray_address: str | None = None
+    threads: int = 1
+    max_calls: int = 20
+    cancel_grace_seconds: float = 5.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class Executor(Protocol):
+    """What the sweep runner (and the service's job worker) needs from an executor."""
+
+    def run_sweep_runs(self, runs: Sequence[SweepRun], keep: str, out_dir: Path,
+                       on_result: ResultFn, should_stop: StopFn) -> None:
+        """Run `runs`; `keep` = "all" writes each run's artifacts into out_dir/runs/<i>."""
+
+    def probe(self, scenario: Scenario) -> RunResult:
+        """Run a (tiny) scenario and return its result: which observables a model has."""
+
+    def run_job(self, scenario: Scenario, out_dir: Path, *,
+                on_progress: Callable[[int, int], None] | None,
+                should_stop: StopFn) -> dict[str, Any]:
+        """Run one job's scenario into out_dir (execute_to_dir); return its summary."""
+
+
+class LocalExecutor:
+    """Runs everything in this process, through the engine."""
+
+    def run_sweep_runs(self, runs: Sequence[SweepRun], keep: str, out_dir: Path,
+                       on_result: ResultFn, should_stop: StopFn) -> None:
+        if keep == "all":
+            self._with_artifacts(runs, out_dir, on_result, should_stop)
+            return
+        import kernels
+
+        for start in range(0, len(runs), BATCH_RUNS):
+            if should_stop():
+                return
+            chunk = list(runs[start:start + BATCH_RUNS])
+
+            def done(i: int, result: RunResult, chunk: list[SweepRun] = chunk) -> None:
+                if result.status != "cancelled":  # a cancelled run is redone on resume
+                    on_result(chunk[i], result)
+
+            kernels.run_batch([r.scenario for r in chunk], on_result=done,
+                              should_stop=should_stop)
+
+    @staticmethod
+    def _with_artifacts(runs: Sequence[SweepRun], out_dir: Path, on_result: ResultFn,
+                        should_stop: StopFn) -> None:
+        """keep = all: one run at a time through execute_to_dir (frames need a sink)."""
+        for run in runs:
+            if should_stop():
+                return
+            result = run_with_artifacts(run, out_dir, should_stop)
+            if result is None:
+                return
+            on_result(run, result)
+
+    def probe(self, scenario: Scenario) -> RunResult:
+        import kernels
+
+        return kernels.run(scenario)
+
+    def run_job(self, scenario: Scenario, out_dir: Path, *,
+                on_progress: Callable[[int, int], None] | None,
+                should_stop: StopFn) -> dict[str, Any]:
+        return execute_to_dir(scenario, out_dir, on_progress=on_progress,
+                              should_stop=should_stop)
+
+
+def run_with_artifacts(run: SweepRun, out_dir: Path, should_stop: StopFn | None
+                       ) -> RunResult | None:
+    """One keep = all run into out_dir/runs/<index>; None (and no folder) if cancelled."""
+    folder = Path(out_dir) / "runs" / str(run.index)
+    got: list[RunResult] = []
+    execute_to_dir(run.scenario, folder, should_stop=should_stop, overwrite=True,
+                   on_result=got.append)
+    if got[0].status == "cancelled":
+        shutil.rmtree(folder, ignore_errors=True)
+        return None
+    return got[0]
+
+
+def make_executor(config: ExecutorConfig | dict[str, Any] | None) -> Executor:
+    """The executor `config` names (local when None)."""
+    if config is None:
+        return LocalExecutor()
+    if isinstance(config, dict):
+        config = ExecutorConfig(**config)
+    if config.kind == "local":
+        return LocalExecutor()
+    from .ray_executor import RayExecutor
+
+    return RayExecutor(config)
