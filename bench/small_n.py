@@ -6,8 +6,9 @@
     python -m bench.small_n --full-fig2a    # also time the full Fig. 2a protocol preset
 
 Single runs: Vicsek rule, density 4, r = 1 (<=), eta = 0.5, new-heading move, 3000 steps,
-observables every step, one thread, through `kernels.run` (compile excluded by a warm-up
-run), against the numpy + scipy cKDTree step with its polarization every step.
+observables every step (all of the model's, then the polarization alone, which is what the
+baseline computes), one thread, through `kernels.run` (compile excluded by a warm-up run),
+against the numpy + scipy cKDTree step with its polarization every step.
 The reduced Fig. 2a sweep: eta = 0.5 ... 5.0 (step 0.5) x (N, L) = (100, 5), (400, 10),
 4 replicas, 3000 steps, polarization mean from step 1000, through `flocklab sweep` (a
 fresh process, compile and start-up included) against the cKDTree script doing the same
@@ -53,11 +54,13 @@ def single(sizes: list[int], steps: int) -> None:
     from bench import ckdtree_vicsek
     from schemas import Scenario
 
-    for n in sizes:
+    for n, chosen in ((n, c) for n in sizes for c in (None, ["polarization"])):
         L = math.sqrt(n / 4.0)
         if L < 2.0:
             L = 2.0  # the periodic box needs r <= L / 2
-        sc = Scenario.model_validate(vicsek_scenario(n, L, 0.5, steps))
+        doc = vicsek_scenario(n, L, 0.5, steps)
+        doc["recording"]["observables"] = chosen  # None: every observable of the model
+        sc = Scenario.model_validate(doc)
         kernels.run(sc.model_copy(update={"time": sc.time.model_copy(update={"steps": 5})}))
         res = kernels.run(sc)
         ours = (res.wall_seconds - res.extra["setup_seconds"]) / res.steps
@@ -67,6 +70,7 @@ def single(sizes: list[int], steps: int) -> None:
         theirs = (time.perf_counter() - t0) / base_steps
         print(json.dumps({
             "bench": "single-run", "N": n, "steps": steps, "observables_every": 1,
+            "observables": "all" if chosen is None else ",".join(chosen),
             "engine_path": res.extra["engine_path"],
             "flocklab_us_per_step": round(ours * 1e6, 2),
             "ckdtree_us_per_step": round(theirs * 1e6, 2),

@@ -24,6 +24,24 @@ WINDOW_AGENT_STEPS = 100_000  # the first window: a few ms to tens of ms of work
 WINDOW_SECONDS: float | None = 0.1  # later windows' target length (None: keep the first)
 
 
+class HostArrays:
+    """Host copies of a batch's device arrays (`self.args`), fetched once per window and
+    shared by every replica's reader: copying a whole array per replica made reading a
+    batch's results O(B^2) (at 64 replicas, most of a sweep's system time)."""
+
+    args: dict[str, Any]
+
+    def host(self, name: str) -> np.ndarray:
+        cache = self.__dict__.setdefault("_host_copies", {})
+        if name not in cache:
+            cache[name] = self.args[name].to_numpy()
+        return cache[name]
+
+    def invalidate(self) -> None:
+        """Forget the copies: the device arrays are about to change."""
+        self.__dict__.get("_host_copies", {}).clear()
+
+
 class Batch(Protocol):
     """What a model's fused batch offers the driver (see kernels/vicsek_fused.py)."""
 

@@ -43,6 +43,7 @@ from schemas import Scenario
 
 from . import flocking_observe as fo
 from . import potentials
+from .batch import HostArrays
 from .topology import build_edges, to_csr
 
 nd = ti.types.ndarray()
@@ -827,7 +828,7 @@ def lambda2_rows(pos: np.ndarray, radii: np.ndarray | float, own: bool, inclusiv
     return np.where(components > 1, 0.0, lam)
 
 
-class FlockingBatch:
+class FlockingBatch(HostArrays):
     """The state of a batch of M2 or M3 replicas (any N, graph, radius, obstacles, steps
     each; one mode: fixed graph, switching, or M3), advanced window by window by
     `advance_kernel`."""
@@ -964,6 +965,7 @@ class FlockingBatch:
     def advance(self, s0: int, s1: int) -> None:
         """Advance every replica from step s0 towards s1 (each stops at its own end), in
         launches of at most `chunk` steps while lambda_2 snapshots are taken."""
+        self.invalidate()
         step = s1 - s0 if self.chunk is None else self.chunk
         for a in range(s0, s1, step):
             self.kernel(a, min(a + step, s1), *(self.args[k] for k in self._order))
@@ -992,6 +994,7 @@ class FlockingBatch:
 
     def end_at(self, step: int) -> None:
         """Make `step` every replica's last (cancellation): the next window observes it."""
+        self.invalidate()
         iprm = self.args["iprm"].to_numpy()
         iprm[:, STEPS] = np.minimum(iprm[:, STEPS], step)
         self.args["iprm"].from_numpy(iprm)
@@ -1004,7 +1007,7 @@ class FlockingBatch:
         """The per-step path's series, in its order (kernels/flocking.py, obstacles.py)."""
         nobs = int(iprm[b, NOBS])
         o0 = self.ooff[b]
-        rows = self.args["obs"].to_numpy()[o0:o0 + nobs]
+        rows = self.host("obs")[o0:o0 + nobs]
         col = {k: rows[:, COL[k]] for k in OBS}
         out = {"step": col["step"], **{k: col[k] for k in VELOCITY_KEYS}}
         closest = {k: col[k] for k in ("min_distance", "min_pair_i", "min_pair_j")}
@@ -1020,7 +1023,7 @@ class FlockingBatch:
         out.update({k: col[k] for k in ("valency_mean", "valency_min", "valency_max")})
         n, w = self.scenarios[b].n_agents, self.vwidth[b]
         v0 = int(iprm[b, VOFF])
-        val = self.args["val"].to_numpy()[v0:v0 + nobs * w].reshape(nobs, w)
+        val = self.host("val")[v0:v0 + nobs * w].reshape(nobs, w)
         val = val.astype(np.float64)
         if self.vper[b]:
             out.update({f"valency_{i}": val[:, i] for i in range(n)})
@@ -1038,9 +1041,9 @@ class FlockingBatch:
         a0, a1 = self.aoff[b], self.aoff[b + 1]
         out = {}
         if "position" in arrays:
-            out["position"] = self.args["pos"].to_numpy()[a0:a1]
+            out["position"] = self.host("pos")[a0:a1]
         if "velocity" in arrays or "heading" in arrays:
-            vel = self.args["vel"].to_numpy()[a0:a1]
+            vel = self.host("vel")[a0:a1]
             if "velocity" in arrays:
                 out["velocity"] = vel
             if "heading" in arrays:

@@ -35,6 +35,7 @@ import taichi as ti
 from schemas import Scenario
 from schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
 
+from .batch import HostArrays
 from .formation_forces import F_KINDS, G_KINDS
 from .formation_fused_observe import COMMON, F1_OBS, F2_OBS, N_OBS, OBS, observe
 from .formation_fused_terms import (
@@ -185,7 +186,7 @@ def advance_kernel(rk4: bool):
     return advance, velocity
 
 
-class FormationBatch:
+class FormationBatch(HostArrays):
     """The state of a batch of M4 replicas (any N <= MAX_N, design, gains, path, schedule,
     steps each; one integrator), advanced window by window by `advance_kernel`."""
 
@@ -303,6 +304,7 @@ class FormationBatch:
 
     def advance(self, s0: int, s1: int) -> None:
         """Advance every replica from step s0 towards s1 (each stops at its own end)."""
+        self.invalidate()
         a = self.args
         self.advance_k(s0, s1, s0 * self.per, a["aoff"], a["ooff"], a["prm"], a["iprm"],
                        a["chg"], a["inforce"], a["forms"], self._lead_table(s0, s1),
@@ -312,6 +314,7 @@ class FormationBatch:
 
     def end_at(self, step: int) -> None:
         """Make `step` every replica's last (cancellation): the next window observes it."""
+        self.invalidate()
         iprm = self.args["iprm"].to_numpy()
         iprm[:, STEPS] = np.minimum(iprm[:, STEPS], step)
         self.steps = iprm[:, STEPS].copy()
@@ -323,7 +326,7 @@ class FormationBatch:
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         o0 = self.ooff[b]
-        rows = self.args["obs"].to_numpy()[o0:o0 + iprm[b, NOBS]]
+        rows = self.host("obs")[o0:o0 + iprm[b, NOBS]]
         keep = COMMON + (F1_OBS if self.f1[b] else F2_OBS)
         return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
 
@@ -332,7 +335,7 @@ class FormationBatch:
         a = self.args
         out = {}
         if "position" in arrays:
-            out["position"] = a["pos"].to_numpy()[a0:a1]
+            out["position"] = self.host("pos")[a0:a1]
         if "velocity" in arrays:
             h = int(self.now[b]) * self.per
             table = a["lead0"]
@@ -346,7 +349,7 @@ class FormationBatch:
                 table = self._device("frame_lead", lead)
             self.velocity_k(b, h, a["aoff"], a["prm"], a["iprm"], a["chg"], a["inforce"],
                             a["forms"], table, a["pos"], a["vel"])
-            out["velocity"] = a["vel"].to_numpy()[a0:a1]
+            out["velocity"] = a["vel"].to_numpy()[a0:a1]  # just computed for replica b
         return out
 
     def convergence_keys(self) -> list[str]:

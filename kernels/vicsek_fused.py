@@ -30,6 +30,7 @@ import taichi as ti
 from schemas import PeriodicBox, Scenario, VicsekParams
 
 from . import rng
+from .batch import HostArrays
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
@@ -476,7 +477,7 @@ def advance_kernel(rule: int, periodic: bool):
     return advance
 
 
-class VicsekBatch:
+class VicsekBatch(HostArrays):
     """The state of a batch of M1 replicas (any N, L, eta, steps each; one rule and
     geometry), advanced window by window by `advance_kernel`."""
 
@@ -556,10 +557,12 @@ class VicsekBatch:
 
     def advance(self, s0: int, s1: int) -> None:
         """Advance every replica from step s0 towards s1 (each stops at its own end)."""
+        self.invalidate()
         self.kernel(s0, s1, *(self.args[k] for k in self._order))
 
     def end_at(self, step: int) -> None:
         """Make `step` every replica's last (cancellation): the next window observes it."""
+        self.invalidate()
         iprm = self.args["iprm"].to_numpy()
         iprm[:, STEPS] = np.minimum(iprm[:, STEPS], step)
         self.args["iprm"].from_numpy(iprm)
@@ -570,7 +573,7 @@ class VicsekBatch:
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         o0 = self.ooff[b]
-        rows = self.args["obs"].to_numpy()[o0:o0 + iprm[b, NOBS]]
+        rows = self.host("obs")[o0:o0 + iprm[b, NOBS]]
         keep = [c for c in OBS if c != "step"]
         if self.rule != "leader":
             keep.remove("leader_error")
@@ -584,11 +587,11 @@ class VicsekBatch:
     def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
         a0, a1 = self.aoff[b], self.aoff[b + 1]
         out = {}
-        e = self.args["ew"].to_numpy()[a0:a1]
+        e = self.host("ew")[a0:a1]
         th = (np.arctan2(e[:, 1], e[:, 0]) if self.rule == "vicsek"
-              else self.args["theta"].to_numpy()[a0:a1])
+              else self.host("theta")[a0:a1])
         if "position" in arrays:
-            out["position"] = self.args["pos"].to_numpy()[a0:a1]
+            out["position"] = self.host("pos")[a0:a1]
         if "heading" in arrays:
             out["heading"] = th
         if "velocity" in arrays:
