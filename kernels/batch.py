@@ -24,12 +24,26 @@ WINDOW_AGENT_STEPS = 100_000  # the first window: a few ms to tens of ms of work
 WINDOW_SECONDS: float | None = 0.1  # later windows' target length (None: keep the first)
 
 
-class HostArrays:
-    """Host copies of a batch's device arrays (`self.args`), fetched once per window and
-    shared by every replica's reader: copying a whole array per replica made reading a
-    batch's results O(B^2) (at 64 replicas, most of a sweep's system time)."""
+class FusedBatch:
+    """What every model's fused batch shares: its device arrays `args`, among them `iprm`,
+    the per-replica integer slots whose slot 0 is the replica's last step; and host copies
+    of the arrays, fetched once per window and shared by every replica's reader (copying a
+    whole array per replica made reading a batch's results O(B^2): at 64 replicas, most of
+    a sweep's system time)."""
 
     args: dict[str, Any]
+    STEPS = 0  # iprm slot of each replica's last step
+
+    def end_at(self, step: int) -> None:
+        """Make `step` every replica's last (cancellation): the next window observes it."""
+        self.invalidate()
+        iprm = self.args["iprm"].to_numpy()
+        iprm[:, self.STEPS] = np.minimum(iprm[:, self.STEPS], step)
+        self.args["iprm"].from_numpy(iprm)
+
+    def status(self) -> np.ndarray:
+        """Per-replica integer slots (steps, observation count, divergence step, ...)."""
+        return self.args["iprm"].to_numpy()
 
     def host(self, name: str) -> np.ndarray:
         cache = self.__dict__.setdefault("_host_copies", {})

@@ -43,7 +43,7 @@ from schemas import Scenario
 
 from . import flocking_observe as fo
 from . import potentials
-from .batch import HostArrays
+from .batch import FusedBatch
 from .topology import build_edges, to_csr
 
 nd = ti.types.ndarray()
@@ -828,7 +828,7 @@ def lambda2_rows(pos: np.ndarray, radii: np.ndarray | float, own: bool, inclusiv
     return np.where(components > 1, 0.0, lam)
 
 
-class FlockingBatch(HostArrays):
+class FlockingBatch(FusedBatch):
     """The state of a batch of M2 or M3 replicas (any N, graph, radius, obstacles, steps
     each; one mode: fixed graph, switching, or M3), advanced window by window by
     `advance_kernel`."""
@@ -991,17 +991,6 @@ class FlockingBatch(HostArrays):
             radii = s[:, :, 2] if own else sc.neighbours.radius
             self.lam[b][r0:r1] = lambda2_rows(s[:, :, :2], radii, own, sc.inclusive, comps,
                                               sc.model.lambda2_max_agents)
-
-    def end_at(self, step: int) -> None:
-        """Make `step` every replica's last (cancellation): the next window observes it."""
-        self.invalidate()
-        iprm = self.args["iprm"].to_numpy()
-        iprm[:, STEPS] = np.minimum(iprm[:, STEPS], step)
-        self.args["iprm"].from_numpy(iprm)
-
-    def status(self) -> np.ndarray:
-        """Per-replica integer slots (steps, observation count, divergence step, ...)."""
-        return self.args["iprm"].to_numpy()
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         """The per-step path's series, in its order (kernels/flocking.py, obstacles.py)."""

@@ -35,7 +35,7 @@ import taichi as ti
 from schemas import Scenario
 from schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
 
-from .batch import HostArrays
+from .batch import FusedBatch
 from .formation_forces import F_KINDS, G_KINDS
 from .formation_fused_observe import COMMON, F1_OBS, F2_OBS, N_OBS, OBS, observe
 from .formation_fused_terms import (
@@ -186,7 +186,7 @@ def advance_kernel(rk4: bool):
     return advance, velocity
 
 
-class FormationBatch(HostArrays):
+class FormationBatch(FusedBatch):
     """The state of a batch of M4 replicas (any N <= MAX_N, design, gains, path, schedule,
     steps each; one integrator), advanced window by window by `advance_kernel`."""
 
@@ -313,16 +313,8 @@ class FormationBatch(HostArrays):
         self.now = np.minimum(s1, self.steps)
 
     def end_at(self, step: int) -> None:
-        """Make `step` every replica's last (cancellation): the next window observes it."""
-        self.invalidate()
-        iprm = self.args["iprm"].to_numpy()
-        iprm[:, STEPS] = np.minimum(iprm[:, STEPS], step)
-        self.steps = iprm[:, STEPS].copy()
-        self.args["iprm"].from_numpy(iprm)
-
-    def status(self) -> np.ndarray:
-        """Per-replica integer slots (steps, observation count, divergence step, ...)."""
-        return self.args["iprm"].to_numpy()
+        super().end_at(step)
+        self.steps = np.minimum(self.steps, step)  # the host's copy of iprm[:, STEPS]
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         o0 = self.ooff[b]

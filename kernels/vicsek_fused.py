@@ -30,7 +30,7 @@ import taichi as ti
 from schemas import PeriodicBox, Scenario, VicsekParams
 
 from . import rng
-from .batch import HostArrays
+from .batch import FusedBatch
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
@@ -477,7 +477,7 @@ def advance_kernel(rule: int, periodic: bool):
     return advance
 
 
-class VicsekBatch(HostArrays):
+class VicsekBatch(FusedBatch):
     """The state of a batch of M1 replicas (any N, L, eta, steps each; one rule and
     geometry), advanced window by window by `advance_kernel`."""
 
@@ -559,17 +559,6 @@ class VicsekBatch(HostArrays):
         """Advance every replica from step s0 towards s1 (each stops at its own end)."""
         self.invalidate()
         self.kernel(s0, s1, *(self.args[k] for k in self._order))
-
-    def end_at(self, step: int) -> None:
-        """Make `step` every replica's last (cancellation): the next window observes it."""
-        self.invalidate()
-        iprm = self.args["iprm"].to_numpy()
-        iprm[:, STEPS] = np.minimum(iprm[:, STEPS], step)
-        self.args["iprm"].from_numpy(iprm)
-
-    def status(self) -> np.ndarray:
-        """Per-replica integer slots (steps, observation count, divergence step, ...)."""
-        return self.args["iprm"].to_numpy()
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         o0 = self.ooff[b]
