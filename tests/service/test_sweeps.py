@@ -307,15 +307,18 @@ def test_openapi_describes_the_sweep_body(http: httpx.Client):
 
 def test_service_killed_mid_sweep_resumes_after_restart(make_server, tmp_path: Path):
     data = tmp_path / "data"
-    s1 = make_server(env=SWEEP_ENV, data_dir=data)
+    # Runs of about half a second each, so the API is killed well before the sweep ends
+    # (at 6e4 agent-steps a run, a slow poll could see the whole sweep finish first).
+    env = {**SWEEP_ENV, "FLOCKLAB_MAX_SWEEP_AGENT_STEPS": "20000000"}
+    s1 = make_server(env=env, data_dir=data)
     with httpx.Client(base_url=s1.url, timeout=30) as http:
-        created = submit(http, sweep_spec(etas=(0.5, 3.0), replicas=3, n=200, steps=300,
+        created = submit(http, sweep_spec(etas=(0.5, 3.0), replicas=3, n=1000, steps=1500,
                                           name="restart"))
         before = wait_sweep(http, created["id"], until=lambda s: s["runs_done"] >= 2)
     killed_at = time.time()
     s1.kill()  # kill -9 the API; its orphaned worker stops by itself
 
-    s2 = make_server(env=SWEEP_ENV, data_dir=data)
+    s2 = make_server(env=env, data_dir=data)
     with httpx.Client(base_url=s2.url, timeout=30) as http:
         done = wait_sweep(http, created["id"], timeout=180)
         assert done["status"] == "succeeded" and done["attempts"] == 2
