@@ -3,11 +3,11 @@
 State: positions r_i and velocities v_i (double integrator, eq. 1). Control (eq. 3):
   u_i = - sum_{j in N_i} (v_i - v_j) - sum_{j in N_i} grad_{r_i} V_ij(|r_ij|)
 fixed     N_i from a CSR graph in agent-id order (no spatial search, no sorting).
-switching N_i = {j : |r_ij| < R} on the neighbour grid (kernels/flocking_grid.py; state
+switching N_i = {j : |r_ij| < R} on the neighbour grid (kernels/space/plane_grid.py; state
           kept in grid order; at small N over all pairs instead), V saturated at R
           (eq. 10): no force at R or beyond.
 One step: semi-implicit Euler (v' = v + dt u, r' = r + dt v') fused into one kernel, or
-RK4 (kernels/integrators.py) with the neighbour sets re-evaluated at every stage (stages
+RK4 (kernels/space/integrate.py) with the neighbour sets re-evaluated at every stage (stages
 2-4 on a grid built at the stage positions).
 Observables at observation steps only: velocity statistics, W (eq. 5) or Q (eq. 10),
 valencies, components, lambda_2, and the closest pair.
@@ -40,15 +40,15 @@ from .flocking_forces import (
     root_labels,
 )
 from .flocking_fused import FlockingBatch
-from .flocking_grid import PlaneGrid
 from .flocking_navigation import NAV_SIZE, ObstacleGrid
-from .graph import count_roots, reset_parent
-from .grid import permute, permute_rows
-from .initial import InitialState, initial_state
-from .integrators import gather_rows, rk4_begin, rk4_finish, rk4_stage
-from .layout import SortedState
 from .model import ModelKernel, register_kernel
 from .result import SimulationDiverged
+from .space.graph import count_roots, reset_parent
+from .space.grid import permute, permute_rows
+from .space.initial import InitialState, initial_state
+from .space.integrate import gather_rows, rk4_begin, rk4_finish, rk4_stage
+from .space.plane_grid import PlaneGrid
+from .space.state import SortedState
 from .topology import build_edges, to_csr
 
 DIVERGED_CAUSE = (

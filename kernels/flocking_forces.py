@@ -6,13 +6,13 @@ Control law for agent i (paper 000 eq. 3; paper 002 eq. 3):
         [- grad V_i(r_i) - c_d v_i where the damping region holds]     (paper 002 only)
 with N_i from a fixed graph (CSR, potential never saturated: eq. 4-5), or metric: j in N_i
 iff s_ij < R_ij (or <=), the potential saturated at s >= R_ij (eq. 10), found on a grid
-(kernels/flocking_grid.py) or, at small N, over all pairs, through one visitor interface.
+(kernels/space/plane_grid.py) or, at small N, over all pairs, through one visitor interface.
 R_ij is
   uniform  R                                     (paper 000, section 5)
   own      R_i, agent i's adaptive radius        (paper 002, eq. 4 as printed)
   min      min(R_i, R_j)                         (a symmetric variant)
 Semi-implicit Euler (the default step): v' = v + dt u(r, v), r' = r + dt v'.
-`accel` kernels write u alone, for the RK4 stages (kernels/integrators.py).
+`accel` kernels write u alone, for the RK4 stages (kernels/space/integrate.py).
 A non-finite result increments bad[0]; the caller raises SimulationDiverged.
 """
 
@@ -21,10 +21,10 @@ from functools import cache
 import taichi as ti
 
 from . import potentials
-from .flocking_grid import make_dense_visitor
 from .flocking_navigation import make_navigation
-from .graph import find, link
-from .grid import make_visitor, within
+from .space.graph import find, link
+from .space.grid import make_visitor, within
+from .space.plane_grid import make_dense_visitor
 
 nd = ti.types.ndarray()
 # Slots of the force parameter array.
@@ -217,7 +217,7 @@ def grid_observe_kernel(rule: int, inclusive: bool, search: str):
     """Kernel writing, per agent (grid order): valency |N_i|, the nearest agent among the
     visited candidates (squared distance and slot), sum_{j != i} (U_ij - V(R_ij)) (the
     saturated potential less its constant), and the union of every edge into `parent`
-    (i's root found once and carried along, as in kernels/graph.py)."""
+    (i's root found once and carried along, as in kernels/space/graph.py)."""
 
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):

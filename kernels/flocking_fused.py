@@ -49,7 +49,7 @@ from .topology import build_edges, to_csr
 nd = ti.types.ndarray()
 SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
 _WIDEN = 1.0 + 1e-9  # cells a hair wider than R: rounding can never hide a neighbour
-MAX_CELLS_ACROSS = 2.0**30  # as kernels/grid.py: beyond it the swarm has run away
+MAX_CELLS_ACROSS = 2.0**30  # as kernels/space/grid.py: beyond it the swarm has run away
 FAR = 1e300  # "no obstacle within reach", as kernels/flocking_navigation.py
 NEAREST_NONE = 1e300
 TWO_PI = 2 * np.pi
@@ -111,7 +111,7 @@ def _nonfinite(x, v):
 
 @ti.func
 def _bucket(cx, cy, nb):
-    """The hashed bucket of cell (cx, cy) among nb (as kernels/grid.py's plane buckets)."""
+    """The hashed bucket of cell (cx, cy) among nb (as kernels/space/grid.py's plane buckets)."""
     h = (ti.cast(cx, ti.u32) * ti.u32(73856093)) ^ (ti.cast(cy, ti.u32) * ti.u32(19349663))
     h ^= h >> ti.u32(13)
     return ti.cast(h % ti.cast(nb, ti.u32), ti.i32)
@@ -834,7 +834,7 @@ class FlockingBatch(FusedBatch):
     `advance_kernel`."""
 
     def __init__(self, scenarios: list[Scenario]):
-        from .initial import initial_state
+        from .space.initial import initial_state
 
         self.scenarios = scenarios
         first = scenarios[0]

@@ -13,7 +13,7 @@ B and grad B are folded over the obstacles within reach by the product rule,
 (B, grad B) <- (B beta_o, beta_o grad B + B grad beta_o),
 grad beta_o = dbeta/ddelta (x - r_o) / |x - r_o|,
 so an obstacle with beta_o = 0 needs no division. Only obstacles with delta_o < d matter,
-so obstacles are bucketed once in a uniform grid of cell d + max rho (kernels.grid, hashed:
+so obstacles are bucketed once in a uniform grid of cell d + max rho (kernels.space.grid, hashed:
 memory per obstacle, not per unit area) and an agent outside their bounding box (grown by
 one cell) skips the search: 10^4 obstacles and 10^6 agents cost O(N) per step.
 """
@@ -23,7 +23,7 @@ from functools import cache
 import numpy as np
 import taichi as ti
 
-from .grid import Grid, make_visitor
+from .space.grid import Grid, make_visitor
 
 nd = ti.types.ndarray()
 # Slots of the navigation parameter array.

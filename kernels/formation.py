@@ -44,12 +44,12 @@ from .formation_fused import FormationBatch
 from .formation_path import make_path
 from .formation_props import at_leader, d2_isolated, d3_holds, roots
 from .formation_schedule import OffsetSchedule
-from .graph import MetricGraph
-from .grid import Grid, make_visitor, permute, permute_rows, within
-from .initial import initial_state
-from .layout import SortedState
 from .model import ModelKernel, register_kernel
 from .result import SimulationDiverged
+from .space.graph import MetricGraph
+from .space.grid import Grid, make_visitor, permute, permute_rows, within
+from .space.initial import initial_state
+from .space.state import SortedState
 
 nd = ti.types.ndarray()
 _NO_PAIR = 1e300  # nearest-candidate sentinel

@@ -55,15 +55,15 @@ from .formation_fused_terms import (
 )
 from .formation_path import SplineTable, make_path
 from .formation_schedule import OffsetSchedule
-from .grid import _WIDEN as GRID_WIDEN
-from .initial import initial_state
+from .space.grid import _WIDEN as GRID_WIDEN
+from .space.initial import initial_state
 
 nd = ti.types.ndarray()
 MAX_N = 512  # all pairs up to here: at N = 1000 a fused F2 step cost as much CPU as a
 # per-step one (4.3 vs 4.2 ms, the per-step path on 2 threads), at N = 500 1.3 vs 2.2 ms
 SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
 # Why a replica stopped (iprm[CAUSE]), as the per-step path words it: its step check
-# (0, 1), or its grid's check of the positions it buckets (2, 3; kernels/grid.py), which
+# (0, 1), or its grid's check of the positions it buckets (2, 3; kernels/space/grid.py), which
 # runs first at every step and RK4 stage. Cause 3 is formatted with prm[EXTENT].
 CAUSES = (
     "two agents at the same position, where g is singular (dt too large lets agents jump "

@@ -13,7 +13,7 @@ from .formation_forces import F_KINDS, G_KINDS
 N_PRM = 20
 (STEPS, EVERY, BAD, CAUSE, NOBS, FKIND, GKIND, F1, SPLINE, C0, NC, I0, F0) = range(13)
 N_IPRM = 13
-MAX_CELLS_ACROSS = 2.0**30  # as kernels/grid.py
+MAX_CELLS_ACROSS = 2.0**30  # as kernels/space/grid.py
 
 
 @ti.func

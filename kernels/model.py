@@ -19,7 +19,7 @@ from schemas import Scenario
 class ModelKernel(ABC):
     """One model's state and step on the Taichi backend.
 
-    Subclasses allocate their state in `__init__` (from `kernels.initial`), advance it in
+    Subclasses allocate their state in `__init__` (from `kernels.space.initial`), advance it in
     `step`, and report observables at the current state in `observe`.
     """
 

@@ -31,8 +31,8 @@ from .flocking_forces import (
     radius_kernel,
 )
 from .flocking_navigation import NAV_SIZE, ObstacleGrid, nav_eval_kernel, nav_parameters
-from .initial import InitialState
 from .model import register_kernel
+from .space.initial import InitialState
 
 
 @register_kernel

@@ -21,13 +21,13 @@ import taichi as ti
 
 from schemas import PeriodicBox, Scenario, VicsekParams
 
-from . import rng
-from .graph import MetricGraph, count_roots, find, link, reset_parent
-from .grid import Grid, make_visitor, within
-from .initial import initial_state
-from .layout import SortedState
 from .model import ModelKernel, register_kernel
 from .result import SimulationDiverged
+from .space import rng
+from .space.graph import MetricGraph, count_roots, find, link, reset_parent
+from .space.grid import Grid, make_visitor, within
+from .space.initial import initial_state
+from .space.state import SortedState
 from .vicsek_fused import VicsekBatch
 
 nd = ti.types.ndarray()

@@ -29,8 +29,8 @@ import taichi as ti
 
 from schemas import PeriodicBox, Scenario, VicsekParams
 
-from . import rng
 from .batch import FusedBatch
+from .space import rng
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
@@ -52,7 +52,7 @@ CAUSES = (
     ("position", "the swarm spans over 2^30 neighbour radii (agents escaping: dt too large "
                  "or forces unbounded), or a position became non-finite"),
 )
-MAX_CELLS_ACROSS = 2.0**30  # as kernels/grid.py: beyond it the swarm has run away
+MAX_CELLS_ACROSS = 2.0**30  # as kernels/space/grid.py: beyond it the swarm has run away
 # Observable columns, in the order the per-step path reports them.
 OBS = ("step", "polarization", "heading_spread", "leader_error", "components",
        "degree_mean", "degree_min", "degree_max", "isolated", "linked_intervals")
@@ -482,7 +482,7 @@ class VicsekBatch(FusedBatch):
     geometry), advanced window by window by `advance_kernel`."""
 
     def __init__(self, scenarios: list[Scenario]):
-        from .initial import initial_state
+        from .space.initial import initial_state
 
         self.scenarios = scenarios
         first = scenarios[0]

@@ -1,6 +1,6 @@
 """Independent brute-force numpy references: O(N^2) neighbour sets and model steps.
 
-They share nothing with the engine but the counter-based noise (kernels.rng.uniform_np),
+They share nothing with the engine but the counter-based noise (kernels.space.rng.uniform_np),
 which must be replayed to compare noisy runs step by step.
 """
 

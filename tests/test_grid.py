@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from kernels.grid import Grid, make_visitor, permute_rows, within
+from kernels.space.grid import Grid, make_visitor, permute_rows, within
 from tests.reference import adjacency
 
 nd = ti.types.ndarray()
@@ -171,8 +171,8 @@ def test_half_stencil_graph_matches_brute_force(taichi_cpu, inclusive, L):
     """Degrees and component count from the half-stencil union-find pass."""
     from scipy.sparse.csgraph import connected_components
 
-    from kernels.graph import MetricGraph
-    from kernels.layout import SortedState
+    from kernels.space.graph import MetricGraph
+    from kernels.space.state import SortedState
 
     rng = np.random.default_rng(10)
     r = 0.5

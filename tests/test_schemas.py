@@ -169,7 +169,7 @@ def test_every_model_runs_reproducibly_on_every_available_backend(taichi_cpu):
 def test_jittered_lattice_start_keeps_agents_apart():
     from scipy.spatial import cKDTree
 
-    from kernels.initial import initial_state
+    from kernels.space.initial import initial_state
 
     data = with_("initial", {"kind": "random", "N": 1600, "region": {
         "kind": "lattice", "low": [1, 1], "spacing": 0.2, "jitter": 0.3}})

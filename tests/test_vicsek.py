@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import kernels
-from kernels import rng
+from kernels.space import rng
 from schemas import Scenario
 from tests.reference import vicsek_step
 

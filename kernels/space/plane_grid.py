@@ -1,6 +1,6 @@
 """A dense plane grid for compact swarms: row-major cells over the bounding box.
 
-The engine's plane grid (kernels/grid.py) hashes cells into buckets, so the 3x3 cells
+The engine's plane grid (kernels/space/grid.py) hashes cells into buckets, so the 3x3 cells
 around an agent lie at unrelated places in memory. When the swarm's bounding box holds at
 most `CELLS_PER_AGENT` cells of side R per agent, this grid numbers the cells row by row
 instead: the three cells of a row are one contiguous range of agents, as in the periodic
@@ -18,9 +18,9 @@ import math
 import numpy as np
 import taichi as ti
 
-from . import runtime
+from .. import runtime
+from ..result import SimulationDiverged
 from .grid import MAX_CELLS_ACROSS, Grid, bbox_buffer, bounding_box
-from .result import SimulationDiverged
 
 nd = ti.types.ndarray()
 CELLS_PER_AGENT = 4

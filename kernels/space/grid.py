@@ -25,8 +25,8 @@ import math
 import numpy as np
 import taichi as ti
 
-from . import runtime
-from .result import SimulationDiverged
+from .. import runtime
+from ..result import SimulationDiverged
 
 nd = ti.types.ndarray()
 _WIDEN = 1.0 + 1e-9

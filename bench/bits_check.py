@@ -1,0 +1,165 @@
+"""Bit-identity guard for engine refactors: hash every example and preset's final state.
+
+Runs every scenario in `examples/*.json` (sweeps are skipped) and every registered preset on
+each engine path that applies to it (the per-step path always; the fused small-N path where
+`kernels.engine.fused_batch` picks it), and writes one JSON object
+per case: sha256 of the final per-agent arrays (position, velocity, heading: those the
+model has) and of every observable series. Scenarios of up to `--full-n` agents run their
+full length (formation changes, obstacle passages and convergence included); larger ones
+stop after `--steps` steps, which keeps the whole check to a few minutes. A pure move of
+code must leave every hash unchanged:
+
+    python bench/bits_check.py --out base.json                  # on the old code
+    python bench/bits_check.py --out new.json --compare base.json   # on the new code
+
+With `--compare FILE` every case whose hashes differ (or that is missing on either side) is
+listed and the exit status is 1. Only the public engine API is used, so the same script
+runs on the code before and after a restructuring.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+ARRAYS = ["position", "velocity", "heading"]
+
+
+class LastFrame:
+    """A frame sink that keeps only the latest frame."""
+
+    def __init__(self) -> None:
+        self.arrays: dict[str, np.ndarray] = {}
+
+    def frame(self, step: int, time: float, arrays: dict[str, np.ndarray]) -> None:
+        self.arrays = {k: np.array(v) for k, v in arrays.items()}
+
+
+def digest(a: np.ndarray) -> str:
+    """sha256 of an array's dtype, shape and bytes (C order)."""
+    a = np.ascontiguousarray(a)
+    h = hashlib.sha256(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def scenarios(max_steps: int, full_n: int) -> Iterator[tuple[str, dict[str, Any]]]:
+    """(case name, scenario document) for every example scenario and preset, with the step
+    count of those over `full_n` agents cut to `max_steps`, and the final frame of every
+    per-agent array recorded."""
+    from schemas import Scenario
+    from schemas.presets import PRESETS, get_preset
+
+    docs: list[tuple[str, dict[str, Any]]] = []
+    for path in sorted((ROOT / "examples").glob("*.json")):
+        doc = json.loads(path.read_text())
+        if "base" in doc and "axes" in doc:  # a sweep, not a scenario
+            continue
+        docs.append((f"example:{path.stem}", doc))
+    for name in sorted(PRESETS):
+        docs.append((f"preset:{name}", get_preset(name).model_dump(mode="json")))
+    for name, doc in docs:
+        steps = doc["time"]["steps"]
+        if Scenario.model_validate(doc).n_agents > full_n:
+            steps = min(steps, max_steps)
+        doc["time"] = {**doc["time"], "steps": steps}
+        doc["recording"] = {**doc.get("recording", {}), "every": steps, "arrays": ARRAYS,
+                            "observables_every": 1}
+        doc["backend"] = "cpu"
+        yield name, doc
+
+
+def run_case(doc: dict[str, Any], path: str) -> dict[str, Any]:
+    """Run one scenario on `path` ("per_step" or "fused") and hash what it produced."""
+    import kernels
+    from kernels import engine
+    from schemas import Scenario
+
+    scenario = Scenario.model_validate(doc)
+    sink = LastFrame()
+    saved = engine.FUSED_MAX_N
+    if path == "per_step":
+        engine.FUSED_MAX_N = 0  # as the tests' `path` fixture forces the per-step path
+    try:
+        res = kernels.run(scenario, sink=sink)
+    finally:
+        engine.FUSED_MAX_N = saved
+    return {
+        "status": res.status,
+        "steps": res.steps,
+        "engine_path": res.extra.get("engine_path"),
+        "arrays": {k: digest(v) for k, v in sorted(sink.arrays.items())},
+        "observables": {k: digest(v) for k, v in sorted(res.observables.items())},
+    }
+
+
+def paths_for(doc: dict[str, Any]) -> list[str]:
+    """The engine paths that apply to a scenario: per-step always, fused where chosen."""
+    from kernels import engine
+    from schemas import Scenario
+
+    fused = engine.fused_batch(Scenario.model_validate(doc), "cpu") is not None
+    return ["per_step", "fused"] if fused else ["per_step"]
+
+
+def compare(now: dict[str, Any], base: dict[str, Any]) -> list[str]:
+    """Every difference between two result files, one line each."""
+    out = []
+    for case in sorted(set(now) | set(base)):
+        if case not in base:
+            out.append(f"{case}: not in the baseline")
+        elif case not in now:
+            out.append(f"{case}: missing from this run")
+        elif now[case] != base[case]:
+            a, b = now[case], base[case]
+            keys = [k for k in ("status", "steps", "engine_path") if a.get(k) != b.get(k)]
+            for part in ("arrays", "observables"):
+                names = set(a.get(part, {})) | set(b.get(part, {}))
+                keys += [f"{part}.{n}" for n in sorted(names)
+                         if a.get(part, {}).get(n) != b.get(part, {}).get(n)]
+            out.append(f"{case}: differs in {', '.join(keys)}")
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", type=Path, default=Path("bits.json"), help="result JSON to write")
+    ap.add_argument("--compare", type=Path, help="baseline JSON: exit 1 on any mismatch")
+    ap.add_argument("--steps", type=int, default=150,
+                    help="step cap of the scenarios over --full-n agents (default 150)")
+    ap.add_argument("--full-n", type=int, default=1000,
+                    help="scenarios of up to this many agents run in full (default 1000)")
+    args = ap.parse_args(argv)
+
+    from kernels import runtime
+
+    runtime.ensure("cpu")
+    results: dict[str, Any] = {}
+    t0 = time.perf_counter()
+    for name, doc in scenarios(args.steps, args.full_n):
+        for path in paths_for(doc):
+            t = time.perf_counter()
+            results[f"{name}[{path}]"] = run_case(doc, path)
+            print(f"{name}[{path}]: {time.perf_counter() - t:.1f} s", file=sys.stderr)
+    args.out.write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
+    print(f"{len(results)} cases in {time.perf_counter() - t0:.0f} s -> {args.out}")
+    if args.compare is None:
+        return 0
+    diffs = compare(results, json.loads(args.compare.read_text()))
+    for line in diffs:
+        print(line)
+    print(f"{len(results) - len(diffs)} identical, {len(diffs)} mismatched")
+    return 1 if diffs else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
