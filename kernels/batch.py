@@ -57,7 +57,7 @@ class FusedBatch:
 
 
 class Batch(Protocol):
-    """What a model's fused batch offers the driver (see kernels/vicsek_fused.py)."""
+    """What a model's fused batch offers the driver (see kernels/models/vicsek/fused.py)."""
 
     scenarios: list[Scenario]
 

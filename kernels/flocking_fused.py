@@ -2,7 +2,7 @@
 
 The equations are the ones `kernels/flocking.py` and `kernels/obstacles.py` document
 (paper 000 eq. 1, 3-5, 10; paper 002 eq. 3-5 and p. 3); only the schedule differs, as in
-`kernels/vicsek_fused.py`: one launch advances every replica of a batch through a window
+`kernels/models/vicsek/fused.py`: one launch advances every replica of a batch through a window
 of steps, replicas in parallel (one per CPU task), each replica's steps and agents serial
 inside, the state kept in the kernel's arrays and the observables written into a
 per-replica buffer. A replica computes the same numbers alone, in a batch, or cut into

@@ -56,7 +56,7 @@ KERNELS: dict[str, type[ModelKernel]] = {}
 # engine imports a family only when a scenario of that kind runs: importing them all costs
 # about a second of Python at every start, which a short run or a sweep worker would pay.
 MODULES = {
-    "vicsek": "kernels.vicsek",
+    "vicsek": "kernels.models.vicsek.kernel",
     "flocking": "kernels.flocking",
     "flocking_obstacles": "kernels.obstacles",
     "formation": "kernels.formation",

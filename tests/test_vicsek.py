@@ -205,7 +205,8 @@ def test_graph_observables_match_brute_force(path, L):
 def test_bucketed_circular_spread_equals_the_sorted_one(taichi_cpu, spread):
     import taichi as ti
 
-    from kernels.vicsek import VicsekKernel, circular_spread
+    from kernels.models.vicsek.kernel import VicsekKernel
+    from kernels.space.observables import circular_spread
 
     k = VicsekKernel(scenario(N=1000))
     gen = np.random.default_rng(int(spread * 10))

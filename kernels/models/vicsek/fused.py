@@ -1,8 +1,8 @@
 """M1 on the small-N path: many steps of many replicas in one kernel launch.
 
-The rule is the one `kernels/vicsek.py` documents (paper 001, eq. 1-2, 17-18, 22; Vicsek
-et al. 1995); only the schedule differs. At small N a step costs microseconds of arithmetic
-but milliseconds of launches and host round trips, so here one launch advances every
+The rule is the one `kernels/models/vicsek/kernel.py` documents (paper 001, eq. 1-2, 17-18,
+22; Vicsek et al. 1995); only the schedule differs. At small N a step costs microseconds of
+arithmetic but milliseconds of launches and host round trips, so here one launch advances every
 replica of a batch through a whole window of steps: replicas run in parallel (one per
 CPU task), each replica's steps and agents serially inside, the state never leaves the
 kernel's arrays, and the observables go into a per-replica buffer row by row. The host
@@ -29,8 +29,8 @@ import taichi as ti
 
 from schemas import PeriodicBox, Scenario, VicsekParams
 
-from .batch import FusedBatch
-from .space import rng
+from ...batch import FusedBatch
+from ...space import rng
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
@@ -482,7 +482,7 @@ class VicsekBatch(FusedBatch):
     geometry), advanced window by window by `advance_kernel`."""
 
     def __init__(self, scenarios: list[Scenario]):
-        from .space.initial import initial_state
+        from ...space.initial import initial_state
 
         self.scenarios = scenarios
         first = scenarios[0]

@@ -21,14 +21,14 @@ import taichi as ti
 
 from schemas import PeriodicBox, Scenario, VicsekParams
 
-from .model import ModelKernel, register_kernel
-from .result import SimulationDiverged
-from .space import rng
-from .space.graph import MetricGraph, count_roots, find, link, reset_parent
-from .space.grid import Grid, make_visitor, within
-from .space.initial import initial_state
-from .space.state import SortedState
-from .vicsek_fused import VicsekBatch
+from ...model import ModelKernel, register_kernel
+from ...result import SimulationDiverged
+from ...space import rng
+from ...space.graph import MetricGraph, count_roots, find, link, reset_parent
+from ...space.grid import Grid, make_visitor, within
+from ...space.initial import initial_state
+from ...space.state import SortedState
+from .fused import VicsekBatch
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
@@ -322,13 +322,3 @@ class VicsekKernel(ModelKernel):
                 "open_since_step": self.linked["open_since"],
             }
         }
-
-
-def circular_spread(theta: np.ndarray) -> float:
-    """Length of the shortest arc holding every heading: 2 pi minus the largest gap."""
-    a = np.sort(np.mod(theta, 2 * np.pi))
-    if a.size < 2:
-        return 0.0
-    gaps = np.diff(a)
-    wrap = a[0] + 2 * np.pi - a[-1]
-    return float(2 * np.pi - max(gaps.max(), wrap))
