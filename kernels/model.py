@@ -57,8 +57,8 @@ KERNELS: dict[str, type[ModelKernel]] = {}
 # about a second of Python at every start, which a short run or a sweep worker would pay.
 MODULES = {
     "vicsek": "kernels.models.vicsek.kernel",
-    "flocking": "kernels.flocking",
-    "flocking_obstacles": "kernels.obstacles",
+    "flocking": "kernels.models.flocking.kernel",
+    "flocking_obstacles": "kernels.models.flocking.obstacles",
     "formation": "kernels.formation",
 }
 

@@ -13,7 +13,7 @@ from pydantic import ValidationError
 from scipy.sparse.csgraph import connected_components
 
 import kernels
-from kernels.topology import build_edges, to_csr
+from kernels.models.flocking.topology import build_edges, to_csr
 from schemas import PRESETS, Scenario
 from schemas.flocking import GraphSpec
 from tests import test_flocking_reference as reference

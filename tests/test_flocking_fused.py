@@ -1,4 +1,4 @@
-"""The fused small-N path of M2 and M3 (kernels/flocking_fused.py): a replica gives the
+"""The fused small-N path of M2 and M3 (kernels/models/flocking/fused.py): a replica gives the
 same bits alone, in a batch, cut into any windows, and the same prefix when cancelled; it
 agrees with the per-step path; the engine picks the path from the scenario alone.
 
@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import kernels
-from kernels import engine, flocking_fused
+from kernels import engine
+from kernels.models.flocking import fused as flocking_fused
 from schemas import Scenario
 from tests.test_flocking_reference import lattice, m2_scenario, m3_scenario
 

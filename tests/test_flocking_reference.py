@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import kernels
-from kernels.flocking_fused import FlockingBatch
 from kernels.models import KERNELS
+from kernels.models.flocking.fused import FlockingBatch
 from schemas import Scenario
 
 TOL = 1e-10
@@ -201,7 +201,7 @@ def m3_scenario(n=12, steps=200, dt=0.01, R=2.0, seed=7, **model) -> Scenario:
 
 @pytest.fixture(params=["fused", "per_step"])
 def path(request, monkeypatch, taichi_cpu):
-    """Run the test on both engine paths: the fused small-N one (kernels/flocking_fused.py,
+    """Run the test on both engine paths: the fused small-N one (kernels/models/flocking/fused.py,
     where the engine takes it) and the per-step one (forced by lowering the fused path's
     size limit). Pass it on to `make_kernel`."""
     if request.param == "per_step":

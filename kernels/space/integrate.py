@@ -6,7 +6,7 @@ With y = (r, v) and f(y) = (v, u(r, v)):
 The caller evaluates u at each stage state (xs, vs) into `a`; `rk4_stage` adds the stage's
 k = (vs, a) with weight w to the sums (xk, vk) and moves (xs, vs) to y0 + c k for the next
 stage; `rk4_finish` adds k4 and writes y1. Semi-implicit Euler, the default, is fused into
-the force kernels (kernels/flocking_forces.py).
+the force kernels (kernels/models/flocking/forces.py).
 """
 
 import taichi as ti

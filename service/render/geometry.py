@@ -47,7 +47,7 @@ def interaction_edges(run: RunData, pos: np.ndarray) -> np.ndarray | None:
     """
     model = run.scenario.model
     if model.kind == "flocking" and model.topology == "fixed":
-        from kernels.topology import build_edges
+        from kernels.models.flocking.topology import build_edges
 
         u, v = build_edges(model.graph, run.n_agents, run.scenario.seed)
         return np.column_stack([u, v]).astype(np.int64)

@@ -23,7 +23,7 @@ from functools import cache
 import numpy as np
 import taichi as ti
 
-from .space.grid import Grid, make_visitor
+from ...space.grid import Grid, make_visitor
 
 nd = ti.types.ndarray()
 # Slots of the navigation parameter array.

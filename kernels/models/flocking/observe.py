@@ -12,7 +12,7 @@ from scipy.sparse.csgraph import connected_components, laplacian
 from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 from scipy.spatial import cKDTree
 
-from .space.observables import circular_spread
+from ...space.observables import circular_spread
 
 HIST_BINS = 16  # valency_hist_0 .. valency_hist_15, then valency_hist_16plus
 DENSE_EIG_MAX = 32  # dense eigvalsh up to this N; sparse shift-invert (faster) above

@@ -1,6 +1,6 @@
 """M2 and M3 on the small-N path: many steps of many replicas in one kernel launch.
 
-The equations are the ones `kernels/flocking.py` and `kernels/obstacles.py` document
+The equations are the ones `kernel.py` and `obstacles.py` of this package document
 (paper 000 eq. 1, 3-5, 10; paper 002 eq. 3-5 and p. 3); only the schedule differs, as in
 `kernels/models/vicsek/fused.py`: one launch advances every replica of a batch through a window
 of steps, replicas in parallel (one per CPU task), each replica's steps and agents serial
@@ -21,7 +21,7 @@ Euler:
   4. u_i of eq. 3 (and paper 002's -grad V_i - c_d v_i), v' = v + dt u, r' = r + dt v'.
      A non-finite value stops the replica and records the step.
 The mission potential folds the obstacles of the 3x3 cells of a per-replica obstacle grid
-(cells of side obstacle_range + the largest disc radius, as kernels/flocking_navigation.py).
+(cells of side obstacle_range + the largest disc radius, as kernels/models/flocking/navigation.py).
 
 lambda_2 (switching, N <= lambda2_max_agents) needs an eigensolver: the kernel writes
 (r, R_i) at each observation step into a snapshot buffer and the host computes lambda_2
@@ -41,16 +41,16 @@ import taichi as ti
 
 from schemas import Scenario
 
-from . import flocking_observe as fo
+from ...batch import FusedBatch
+from . import observe as fo
 from . import potentials
-from .batch import FusedBatch
 from .topology import build_edges, to_csr
 
 nd = ti.types.ndarray()
 SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
 _WIDEN = 1.0 + 1e-9  # cells a hair wider than R: rounding can never hide a neighbour
 MAX_CELLS_ACROSS = 2.0**30  # as kernels/space/grid.py: beyond it the swarm has run away
-FAR = 1e300  # "no obstacle within reach", as kernels/flocking_navigation.py
+FAR = 1e300  # "no obstacle within reach", as kernels/models/flocking/navigation.py
 NEAREST_NONE = 1e300
 TWO_PI = 2 * np.pi
 HIST = fo.HIST_BINS + 1  # valency histogram columns (the last one: 16 and more)
@@ -237,7 +237,7 @@ def make_visit(pair):
 def navigation(b, x, prm: ti.template(), iprm: ti.template(), opos: ti.template(),
                orad: ti.template(), ostart: ti.template()):
     """(V_i, dV/dx, dV/dy, min boundary distance) at x for replica b: paper 002's
-    navigation function (see kernels/flocking_navigation.py), the obstacles folded by the
+    navigation function (see kernels/models/flocking/navigation.py), the obstacles folded by the
     product rule over the 3x3 cells of the replica's obstacle grid."""
     acc = ti.math.vec4(1.0, 0.0, 0.0, FAR)
     if iprm[b, OM] > 0:
@@ -377,7 +377,7 @@ def advance_kernel(mode: int):
 
     @ti.func
     def force_pair(k, m, d, acc, q, ps: ti.template(), S: ti.template()):
-        # Branch-free, as kernels/flocking_forces.py: acc = (sum_{N_i} v_j + sum_{s < R}
+        # Branch-free, as kernels/models/flocking/forces.py: acc = (sum_{N_i} v_j + sum_{s < R}
         # f d, |N_i|); the select drops f(0) = inf for k itself (a coincident pair keeps it).
         s2 = d.dot(d)
         r2 = pair_radius2(k, q, ps)
@@ -834,7 +834,7 @@ class FlockingBatch(FusedBatch):
     `advance_kernel`."""
 
     def __init__(self, scenarios: list[Scenario]):
-        from .space.initial import initial_state
+        from ...space.initial import initial_state
 
         self.scenarios = scenarios
         first = scenarios[0]
@@ -993,7 +993,7 @@ class FlockingBatch(FusedBatch):
                                               sc.model.lambda2_max_agents)
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
-        """The per-step path's series, in its order (kernels/flocking.py, obstacles.py)."""
+        """The per-step path's series, in its order (kernel.py, obstacles.py)."""
         nobs = int(iprm[b, NOBS])
         o0 = self.ooff[b]
         rows = self.host("obs")[o0:o0 + nobs]
@@ -1063,7 +1063,7 @@ class FlockingBatch(FusedBatch):
 
     def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
         """(step, quantity, cause) in the per-step path's words, or None."""
-        from .flocking import DIVERGED_CAUSE
+        from .kernel import DIVERGED_CAUSE
 
         step = int(iprm[b, BAD])
         if step < 0:

@@ -6,8 +6,8 @@ Per step (after sorting the agents into the neighbour grid):
      R_i <- max(R_i, R_j for j in N_i) otherwise;
   2. the control law of eq. 3,
      u_i = - sum_{j in N_i} [(v_i - v_j) + grad_{r_i} U_ij] - grad_{r_i} V_i - c_d v_i [region],
-     N_i = {j : |r_ij| <= R_i}, U_ij saturated at R_i (kernels/flocking_forces.py), V_i the
-     navigation function over the obstacle grid (kernels/flocking_navigation.py);
+     N_i = {j : |r_ij| <= R_i}, U_ij saturated at R_i (kernels/models/flocking/forces.py), V_i the
+     navigation function over the obstacle grid (kernels/models/flocking/navigation.py);
   3. the integrator (as M2).
 The agent grid is built with the initial radius R, which bounds every R_i (eq. 4 only halves
 or copies a neighbour's radius), so the 3x3 cells always hold N_i.
@@ -19,9 +19,10 @@ import numpy as np
 
 from schemas import Scenario
 
-from . import flocking_observe as fo
-from .flocking import FlockingKernel, _f64, _i32
-from .flocking_forces import (
+from ...model import register_kernel
+from ...space.initial import InitialState
+from . import observe as fo
+from .forces import (
     DAMPING,
     P_CD,
     P_FLOOR,
@@ -30,9 +31,8 @@ from .flocking_forces import (
     RADIUS_RULES,
     radius_kernel,
 )
-from .flocking_navigation import NAV_SIZE, ObstacleGrid, nav_eval_kernel, nav_parameters
-from .model import register_kernel
-from .space.initial import InitialState
+from .kernel import FlockingKernel, _f64, _i32
+from .navigation import NAV_SIZE, ObstacleGrid, nav_eval_kernel, nav_parameters
 
 
 @register_kernel

@@ -12,8 +12,8 @@ RK4 (kernels/space/integrate.py) with the neighbour sets re-evaluated at every s
 Observables at observation steps only: velocity statistics, W (eq. 5) or Q (eq. 10),
 valencies, components, lambda_2, and the closest pair.
 
-`FlockingKernel` is also the base of M3 (kernels/obstacles.py), which adds per-agent radii,
-the navigation function, damping and the adaptive radius through the hooks marked below.
+`FlockingKernel` is also the base of M3 (obstacles.py), which adds per-agent radii, the
+navigation function, damping and the adaptive radius through the hooks marked below.
 """
 
 from typing import Any
@@ -23,8 +23,16 @@ import taichi as ti
 
 from schemas import Scenario
 
-from . import flocking_observe as fo
-from .flocking_forces import (
+from ...model import ModelKernel, register_kernel
+from ...result import SimulationDiverged
+from ...space.graph import count_roots, reset_parent
+from ...space.grid import permute, permute_rows
+from ...space.initial import InitialState, initial_state
+from ...space.integrate import gather_rows, rk4_begin, rk4_finish, rk4_stage
+from ...space.plane_grid import PlaneGrid
+from ...space.state import SortedState
+from . import observe as fo
+from .forces import (
     NO_DAMPING,
     P_A,
     P_C,
@@ -39,16 +47,8 @@ from .flocking_forces import (
     grid_observe_kernel,
     root_labels,
 )
-from .flocking_fused import FlockingBatch
-from .flocking_navigation import NAV_SIZE, ObstacleGrid
-from .model import ModelKernel, register_kernel
-from .result import SimulationDiverged
-from .space.graph import count_roots, reset_parent
-from .space.grid import permute, permute_rows
-from .space.initial import InitialState, initial_state
-from .space.integrate import gather_rows, rk4_begin, rk4_finish, rk4_stage
-from .space.plane_grid import PlaneGrid
-from .space.state import SortedState
+from .fused import FlockingBatch
+from .navigation import NAV_SIZE, ObstacleGrid
 from .topology import build_edges, to_csr
 
 DIVERGED_CAUSE = (

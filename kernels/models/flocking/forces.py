@@ -20,11 +20,11 @@ from functools import cache
 
 import taichi as ti
 
+from ...space.graph import find, link
+from ...space.grid import make_visitor, within
+from ...space.plane_grid import make_dense_visitor
 from . import potentials
-from .flocking_navigation import make_navigation
-from .space.graph import find, link
-from .space.grid import make_visitor, within
-from .space.plane_grid import make_dense_visitor
+from .navigation import make_navigation
 
 nd = ti.types.ndarray()
 # Slots of the force parameter array.
