@@ -2,7 +2,8 @@
 
 The engine drives a `ModelKernel` through `observe -> step -> ... -> observe`; it knows
 nothing of any model's equations. A new model family is one module with a subclass
-decorated `@register_kernel`, named in `MODULES` below.
+decorated `@register_kernel` in its package under `kernels/models/`, named in `MODULES`
+below.
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ MODULES = {
     "vicsek": "kernels.models.vicsek.kernel",
     "flocking": "kernels.models.flocking.kernel",
     "flocking_obstacles": "kernels.models.flocking.obstacles",
-    "formation": "kernels.formation",
+    "formation": "kernels.models.formation.kernel",
 }
 
 
@@ -68,6 +69,13 @@ def kernel_for(kind: str) -> type[ModelKernel]:
     if kind not in KERNELS:
         importlib.import_module(MODULES[kind])
     return KERNELS[kind]
+
+
+def all_kernels() -> dict[str, type[ModelKernel]]:
+    """The full registry, every family imported (for tooling and tests)."""
+    for kind in MODULES:
+        kernel_for(kind)
+    return KERNELS
 
 
 def register_kernel(cls: type[ModelKernel]) -> type[ModelKernel]:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import kernels
-from kernels.models import KERNELS
+from kernels.model import all_kernels
 from kernels.models.flocking.fused import FlockingBatch
 from schemas import Scenario
 
@@ -261,7 +261,7 @@ def make_kernel(sc: Scenario, hashed: bool = False, path: str = "per_step"):
     path "fused": the fused batch where the engine would take it (`FusedKernel`)."""
     if path == "fused" and kernels.engine.fused_batch(sc, "cpu") is not None:
         return FusedKernel(sc)
-    k = KERNELS[sc.model.kind](sc)
+    k = all_kernels()[sc.model.kind](sc)
     if hashed:
         for g in (k.grid, k.stage_grid):
             if g is not None:

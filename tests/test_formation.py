@@ -9,10 +9,10 @@ import pytest
 from pydantic import ValidationError
 
 import kernels
-from kernels.formation_path import make_path
-from kernels.formation_props import at_leader, d2_isolated, d3_holds, roots
-from kernels.formation_schedule import OffsetSchedule
-from kernels.formation_shapes import named_offsets
+from kernels.models.formation.path import make_path
+from kernels.models.formation.props import at_leader, d2_isolated, d3_holds, roots
+from kernels.models.formation.schedule import OffsetSchedule
+from kernels.models.formation.shapes import named_offsets
 from schemas import Scenario
 from schemas.formation import FormationChange, NamedFormation, SplinePath
 

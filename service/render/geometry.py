@@ -86,7 +86,7 @@ def leaders(run: RunData, t: float) -> Leaders | None:
     model = run.scenario.model
     if model.kind != "formation":
         return None
-    from kernels.formation_path import make_path
+    from kernels.models.formation.path import make_path
 
     obs = run.observables
     if "leader_x" in obs and len(obs["leader_x"]):
@@ -98,7 +98,7 @@ def leaders(run: RunData, t: float) -> Leaders | None:
     samples = np.array([path.position(s) for s in np.linspace(0.0, t_end, 400)])
     targets = None
     if model.design == "F1":
-        from kernels.formation_schedule import OffsetSchedule
+        from kernels.models.formation.schedule import OffsetSchedule
 
         d = float(run.scenario.neighbours.radius)
         b = OffsetSchedule(model.formation, model.schedule, run.n_agents, d).at(t)

@@ -17,7 +17,7 @@ import numpy as np
 
 from schemas.formation import FormationChange, FormationSpec
 
-from .formation_shapes import offsets, rotation
+from .shapes import offsets, rotation
 
 _I = np.eye(2)
 

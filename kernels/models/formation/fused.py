@@ -1,6 +1,6 @@
 """M4 on the small-N path: many steps of many replicas in one kernel launch.
 
-The equations are the ones `kernels/formation.py` documents (paper 003, eq. 1-6, 12):
+The equations are the ones `kernels/models/formation/kernel.py` documents (paper 003, eq. 1-6, 12):
   rdot_i = f(|l_i - r_i|) (l_i - r_i)/|l_i - r_i| + sum_{|r_ij| < d} g(|r_ji|) r_ji/|r_ji|,
   l_i = p(t) + b_i(t) (F1) or p(t) (F2), explicit Euler or classical RK4;
 only the schedule differs. One launch advances every replica of a batch through a window
@@ -35,10 +35,12 @@ import taichi as ti
 from schemas import Scenario
 from schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
 
-from .batch import FusedBatch
-from .formation_forces import F_KINDS, G_KINDS
-from .formation_fused_observe import COMMON, F1_OBS, F2_OBS, N_OBS, OBS, observe
-from .formation_fused_terms import (
+from ...batch import FusedBatch
+from ...space.grid import _WIDEN as GRID_WIDEN
+from ...space.initial import initial_state
+from .forces import F_KINDS, G_KINDS
+from .fused_observe import COMMON, F1_OBS, F2_OBS, N_OBS, OBS, observe
+from .fused_terms import (
     BAD,
     CAUSE,
     DT,
@@ -53,10 +55,8 @@ from .formation_fused_terms import (
     rate,
     runaway,
 )
-from .formation_path import SplineTable, make_path
-from .formation_schedule import OffsetSchedule
-from .space.grid import _WIDEN as GRID_WIDEN
-from .space.initial import initial_state
+from .path import SplineTable, make_path
+from .schedule import OffsetSchedule
 
 nd = ti.types.ndarray()
 MAX_N = 512  # all pairs up to here: at N = 1000 a fused F2 step cost as much CPU as a

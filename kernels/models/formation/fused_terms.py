@@ -5,7 +5,7 @@ check."""
 
 import taichi as ti
 
-from .formation_forces import F_KINDS, G_KINDS
+from .forces import F_KINDS, G_KINDS
 
 # Per-replica parameter slots: prm (f64) and iprm (i32).
 (R2, D, D2, KG, FA, FB, DT, TSTEP, SX, SY, QX, QY, T_ARR, EX, EY, COLLIDE, TOL,

@@ -24,8 +24,14 @@ import taichi as ti
 from schemas import Scenario
 from schemas.formation import FormationParams, SaturatingF
 
-from .formation_dense import bucket_aggregates, coarse_euler, max_count, stencil_reach
-from .formation_forces import (
+from ...model import ModelKernel, register_kernel
+from ...result import SimulationDiverged
+from ...space.graph import MetricGraph
+from ...space.grid import Grid, make_visitor, permute, permute_rows, within
+from ...space.initial import initial_state
+from ...space.state import SortedState
+from .dense import bucket_aggregates, coarse_euler, max_count, stencil_reach
+from .forces import (
     F_KINDS,
     G_KINDS,
     P_D2,
@@ -40,16 +46,10 @@ from .formation_forces import (
     leader,
     pair_energy,
 )
-from .formation_fused import FormationBatch
-from .formation_path import make_path
-from .formation_props import at_leader, d2_isolated, d3_holds, roots
-from .formation_schedule import OffsetSchedule
-from .model import ModelKernel, register_kernel
-from .result import SimulationDiverged
-from .space.graph import MetricGraph
-from .space.grid import Grid, make_visitor, permute, permute_rows, within
-from .space.initial import initial_state
-from .space.state import SortedState
+from .fused import FormationBatch
+from .path import make_path
+from .props import at_leader, d2_isolated, d3_holds, roots
+from .schedule import OffsetSchedule
 
 nd = ti.types.ndarray()
 _NO_PAIR = 1e300  # nearest-candidate sentinel

@@ -20,8 +20,8 @@ from functools import cache
 
 import taichi as ti
 
-from .formation_forces import P_D2, P_DT, attract, g_over_s, leader
-from .space.grid import plane_bucket, plane_cell, plane_cell_id, within
+from ...space.grid import plane_bucket, plane_cell, plane_cell_id, within
+from .forces import P_D2, P_DT, attract, g_over_s, leader
 
 nd = ti.types.ndarray()
 M_MAX = 16

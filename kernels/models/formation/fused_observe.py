@@ -4,7 +4,7 @@
 import numpy as np
 import taichi as ti
 
-from .formation_fused_terms import (
+from .fused_terms import (
     COLLIDE,
     D2,
     F1,
