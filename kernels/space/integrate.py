@@ -1,12 +1,18 @@
-"""Classic RK4 for the double integrator dr/dt = v, dv/dt = u(r, v) (paper 000 eq. 1).
+"""Classic RK4 in stage form, for any system y' = f(y) of (N, C) float64 arrays.
 
-With y = (r, v) and f(y) = (v, u(r, v)):
   k1 = f(y0), k2 = f(y0 + h/2 k1), k3 = f(y0 + h/2 k2), k4 = f(y0 + h k3),
   y1 = y0 + h/6 (k1 + 2 k2 + 2 k3 + k4).
-The caller evaluates u at each stage state (xs, vs) into `a`; `rk4_stage` adds the stage's
-k = (vs, a) with weight w to the sums (xk, vk) and moves (xs, vs) to y0 + c k for the next
-stage; `rk4_finish` adds k4 and writes y1. Semi-implicit Euler, the default, is fused into
-the force kernels (kernels/models/flocking/forces.py).
+
+`rk4_begin` sets the stage state ys = y0 and the sum yk = 0. The caller evaluates f at ys
+into k; `rk4_stage` adds w k to yk (w = 1, 2, 2) and moves ys to y0 + c k for the next
+stage (c = h/2, h/2, h); after the fourth evaluation `rk4_finish` writes y1. The sums run
+in the order above, so y1 has the same bits as the formula written out.
+
+The double integrator dr/dt = v, dv/dt = u(r, v) of M2/M3 (paper 000 eq. 1) is the pair
+y = (r, v), f = (v, u): its position stage takes the stage velocity as k and must run
+before the velocity stage moves it (`rk4_stage(r0, rs, vs, ...)`, then
+`rk4_stage(v0, vs, u, ...)`). M4's single integrator r' = u(r) is one array. Semi-implicit
+Euler, the default, is fused into the force kernels of each family.
 """
 
 import taichi as ti
@@ -15,37 +21,49 @@ nd = ti.types.ndarray()
 
 
 @ti.kernel
-def rk4_begin(x0: nd, v0: nd, xs: nd, vs: nd, xk: nd, vk: nd):
-    """Stage state y0, sums zero."""
-    for i in range(x0.shape[0]):
-        for c in ti.static(range(2)):
-            xs[i, c] = x0[i, c]
-            vs[i, c] = v0[i, c]
-            xk[i, c] = 0.0
-            vk[i, c] = 0.0
+def rk4_begin(y0: nd, ys: nd, yk: nd):
+    """Stage state y0, sum zero."""
+    for i in range(y0.shape[0]):
+        for c in range(y0.shape[1]):
+            ys[i, c] = y0[i, c]
+            yk[i, c] = 0.0
 
 
 @ti.kernel
-def rk4_stage(x0: nd, v0: nd, xs: nd, vs: nd, a: nd, xk: nd, vk: nd, w: ti.f64, c: ti.f64):
-    """(xk, vk) += w (vs, a); (xs, vs) <- (x0 + c vs, v0 + c a)."""
-    for i in range(x0.shape[0]):
-        for m in ti.static(range(2)):
-            xk[i, m] += w * vs[i, m]
-            vk[i, m] += w * a[i, m]
-            xs[i, m] = x0[i, m] + c * vs[i, m]
-            vs[i, m] = v0[i, m] + c * a[i, m]
+def rk4_stage(y0: nd, ys: nd, k: nd, yk: nd, w: ti.f64, c: ti.f64):
+    """yk += w k; ys <- y0 + c k."""
+    for i in range(y0.shape[0]):
+        for m in range(y0.shape[1]):
+            yk[i, m] += w * k[i, m]
+            ys[i, m] = y0[i, m] + c * k[i, m]
 
 
 @ti.kernel
-def rk4_finish(x0: nd, v0: nd, vs: nd, a: nd, xk: nd, vk: nd, x_out: nd, v_out: nd,
-               h6: ti.f64, bad: nd):
-    """y1 = y0 + h/6 (k1 + 2 k2 + 2 k3 + k4), with k4 = (vs, a)."""
-    for i in range(x0.shape[0]):
+def rk4_finish(y0: nd, k: nd, yk: nd, h6: ti.f64, y_out: nd):
+    """y1 = y0 + h/6 (k1 + 2 k2 + 2 k3 + k4), with k4 = k."""
+    for i in range(y0.shape[0]):
+        for m in range(y0.shape[1]):
+            y_out[i, m] = y0[i, m] + h6 * (yk[i, m] + k[i, m])
+
+
+@ti.kernel
+def count_nonfinite(a: nd, bad: nd):
+    """bad[0] += the rows of `a` holding a NaN or an infinity."""
+    for i in range(a.shape[0]):
         s = 0.0
-        for m in ti.static(range(2)):
-            x_out[i, m] = x0[i, m] + h6 * (xk[i, m] + vs[i, m])
-            v_out[i, m] = v0[i, m] + h6 * (vk[i, m] + a[i, m])
-            s += x_out[i, m] + v_out[i, m]
+        for m in range(a.shape[1]):
+            s += a[i, m]  # NaN if any term is NaN or infinite
+        if ti.math.isnan(s) or ti.math.isinf(s):
+            ti.atomic_add(bad[0], 1)
+
+
+@ti.kernel
+def count_nonfinite_pairs(a: nd, b: nd, bad: nd):
+    """bad[0] += the rows i where a[i] or b[i] holds a NaN or an infinity."""
+    for i in range(a.shape[0]):
+        s = 0.0
+        for m in range(a.shape[1]):
+            s += a[i, m] + b[i, m]
         if ti.math.isnan(s) or ti.math.isinf(s):
             ti.atomic_add(bad[0], 1)
 

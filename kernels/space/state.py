@@ -2,7 +2,8 @@
 
 Each step the grid's stable permutation moves every per-agent array into bucket order
 (double-buffered), so kernels read neighbours contiguously; `ids[k]` is the agent stored
-in slot k. Outputs are always given back in agent-id order.
+in slot k. Outputs are always given back in agent-id order. `sort(grid, step)` does it at
+most once per step: a step and the observation of the same state share one sort.
 """
 
 import numpy as np
@@ -25,6 +26,20 @@ class SortedState:
         self.ids = ti.ndarray(ti.i32, shape=self.n)
         self.ids.from_numpy(np.arange(self.n, dtype=np.int32))
         self._ids_buf = ti.ndarray(ti.i32, shape=self.n)
+        self._sorted_for = -1  # the step whose positions `cur` is in grid order for
+
+    def sort(self, grid: Grid, step: int) -> None:
+        """Bucket the positions "pos" of step `step` in `grid` and move every array into
+        that order, unless this step's state is already sorted."""
+        if self._sorted_for != step:
+            grid.build(self.cur["pos"], step)
+            self.resort(grid)
+            self._sorted_for = step
+
+    def forget_sort(self) -> None:
+        """The arrays were moved into another grid's order (`resort`): the next `sort`
+        rebuilds."""
+        self._sorted_for = -1
 
     def __getitem__(self, name: str) -> ti.Ndarray:
         return self.cur[name]

@@ -28,7 +28,13 @@ from ...result import SimulationDiverged
 from ...space.graph import count_roots, reset_parent
 from ...space.grid import permute, permute_rows
 from ...space.initial import InitialState, initial_state
-from ...space.integrate import gather_rows, rk4_begin, rk4_finish, rk4_stage
+from ...space.integrate import (
+    count_nonfinite_pairs,
+    gather_rows,
+    rk4_begin,
+    rk4_finish,
+    rk4_stage,
+)
 from ...space.plane_grid import PlaneGrid
 from ...space.state import SortedState
 from . import observe as fo
@@ -92,7 +98,6 @@ class FlockingKernel(ModelKernel):
             self.rk4 = {k: _f64(n, 2) for k in ("xs", "vs", "a", "xk", "vk")}
         else:
             self.rk4 = None
-        self._sorted_for = -1
 
     # --- hooks for M3 -------------------------------------------------------------------
 
@@ -183,10 +188,8 @@ class FlockingKernel(ModelKernel):
 
     def _sort(self, step: int) -> None:
         """Grid order for this step's positions (fixed graphs and all pairs need none)."""
-        if not (self.fixed or self.all_pairs) and self._sorted_for != step:
-            self.grid.build(self.state["pos"], step)
-            self.state.resort(self.grid)
-            self._sorted_for = step
+        if not (self.fixed or self.all_pairs):
+            self.state.sort(self.grid, step)
 
     def step(self, step: int) -> None:
         self._sort(step)
@@ -212,13 +215,17 @@ class FlockingKernel(ModelKernel):
     def _rk4_step(self, step: int, pos_out: ti.Ndarray, vel_out: ti.Ndarray) -> None:
         b, h = self.rk4, self.dt
         x0, v0 = self.state["pos"], self.state["vel"]
-        rk4_begin(x0, v0, b["xs"], b["vs"], b["xk"], b["vk"])
+        rk4_begin(x0, b["xs"], b["xk"])
+        rk4_begin(v0, b["vs"], b["vk"])
         self._accel(x0, v0, b["a"], step, at_state=True)
         for w, c in ((1.0, h / 2), (2.0, h / 2), (2.0, h)):
-            rk4_stage(x0, v0, b["xs"], b["vs"], b["a"], b["xk"], b["vk"], w, c)
+            # (r, v)' = (v, u): the position stage reads vs before the velocity stage moves it.
+            rk4_stage(x0, b["xs"], b["vs"], b["xk"], w, c)
+            rk4_stage(v0, b["vs"], b["a"], b["vk"], w, c)
             self._accel(b["xs"], b["vs"], b["a"], step, at_state=False)
-        rk4_finish(x0, v0, b["vs"], b["a"], b["xk"], b["vk"], pos_out, vel_out, h / 6,
-                   self.bad)
+        rk4_finish(x0, b["vs"], b["xk"], h / 6, pos_out)
+        rk4_finish(v0, b["a"], b["vk"], h / 6, vel_out)
+        count_nonfinite_pairs(pos_out, vel_out, self.bad)
 
     def _accel(self, pos: ti.Ndarray, vel: ti.Ndarray, out: ti.Ndarray, step: int,
                at_state: bool) -> None:

@@ -29,6 +29,7 @@ from ...result import SimulationDiverged
 from ...space.graph import MetricGraph
 from ...space.grid import Grid, make_visitor, permute, permute_rows, within
 from ...space.initial import initial_state
+from ...space.integrate import count_nonfinite, gather_rows, rk4_begin, rk4_finish, rk4_stage
 from ...space.state import SortedState
 from .dense import bucket_aggregates, coarse_euler, max_count, stencil_reach
 from .forces import (
@@ -148,32 +149,6 @@ def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: 
     return euler, rates, observe
 
 
-@ti.kernel
-def _axpy(x: nd, k: nd, a: ti.f64, out: nd):
-    for i in range(x.shape[0]):
-        for c in ti.static(range(2)):
-            out[i, c] = x[i, c] + a * k[i, c]
-
-
-@ti.kernel
-def _gather_rows(src: nd, dst: nd, perm: nd):
-    """dst[i, :] = src[perm[i], :]: undo a permutation."""
-    for i in range(dst.shape[0]):
-        for c in ti.static(range(2)):
-            dst[i, c] = src[perm[i], c]
-
-
-@ti.kernel
-def _rk4_combine(x: nd, k1: nd, k2: nd, k3: nd, k4: nd, dt: ti.f64, out: nd, bad: nd):
-    for i in range(x.shape[0]):
-        for c in ti.static(range(2)):
-            out[i, c] = x[i, c] + dt / 6.0 * (k1[i, c] + 2.0 * k2[i, c] + 2.0 * k3[i, c]
-                                              + k4[i, c])
-        s = out[i, 0] + out[i, 1]
-        if ti.math.isnan(s) or ti.math.isinf(s):
-            ti.atomic_add(bad[0], 1)
-
-
 @register_kernel
 class FormationKernel(ModelKernel):
     kind = "formation"
@@ -215,14 +190,13 @@ class FormationKernel(ModelKernel):
             self.tmp_pos = ti.ndarray(ti.f64, shape=(n, 2))
             self.tmp_vel = ti.ndarray(ti.f64, shape=(n, 2))
             self.tmp_ids = ti.ndarray(ti.i32, shape=n)
-            self.y = ti.ndarray(ti.f64, shape=(n, 2))
-            self.k = [ti.ndarray(ti.f64, shape=(n, 2)) for _ in range(4)]
+            # RK4's stage state, rates and weighted sum of the rates (kernels/space/integrate.py)
+            self.rk4 = {k: ti.ndarray(ti.f64, shape=(n, 2)) for k in ("ys", "k", "yk")}
         self.obs_out: tuple | None = None
         self.cap = p.max_exact_candidates if p.integrator == "euler" else None
         self.fine: tuple[int, Grid] | None = None  # the dense regime's grid, by reach m
         self.agg: tuple | None = None
         self.coarse_steps, self.max_reach = 0, 1  # steps in the dense regime, largest m
-        self._sorted_for = -1
         self.now = 0  # the step index of the current state
 
     # --- time-dependent leader data -----------------------------------------------------
@@ -252,12 +226,6 @@ class FormationKernel(ModelKernel):
 
     # --- stepping -------------------------------------------------------------------------
 
-    def _sort(self, step: int) -> None:
-        if self._sorted_for != step:
-            self.grid.build(self.state["pos"], step)
-            self.state.resort(self.grid)
-            self._sorted_for = step
-
     def _check(self, step: int) -> None:
         bad = self.bad.to_numpy()
         if bad[1]:
@@ -274,7 +242,7 @@ class FormationKernel(ModelKernel):
     def _reach(self, step: int) -> int:
         """Sort the state for an Euler step: by the d-grid (returns 1, exact), or, when the
         densest d-cell holds more than cap/9 agents, by a grid of side d/m (returns m)."""
-        self._sort(step)
+        self.state.sort(self.grid, step)
         if self.cap is None:
             return 1
         densest = max_count(self.grid.count)
@@ -286,7 +254,7 @@ class FormationKernel(ModelKernel):
         fine = self.fine[1]
         fine.build(self.state["pos"], step)
         self.state.resort(fine)
-        self._sorted_for = -1
+        self.state.forget_sort()
         if self.agg is None:
             self.agg = (ti.ndarray(ti.f64, shape=(fine.n_buckets, 3)),
                         ti.ndarray(ti.i64, shape=fine.n_buckets))
@@ -316,15 +284,17 @@ class FormationKernel(ModelKernel):
             st.swap("pos")
             self.now = step + 1
             return
-        self._sort(step)
+        self.state.sort(self.grid, step)
         blend = self._load_times([t, t + 0.5 * self.dt, t + self.dt])
         _, rates, _ = self._kernels(blend)
-        x, (k1, k2, k3, k4) = st["pos"], self.k
-        rates(x, st.ids, *self.b_dev, k1, self.prm, 0, self.bad, *self.grid.view())
-        for slot, a, k_in, k_out in ((1, 0.5, k1, k2), (1, 0.5, k2, k3), (2, 1.0, k3, k4)):
-            _axpy(x, k_in, a * self.dt, self.y)
-            self._rates_at(self.y, slot, k_out, rates, step)
-        _rk4_combine(x, k1, k2, k3, k4, self.dt, st.scratch("pos"), self.bad)
+        x, b, h = st["pos"], self.rk4, self.dt
+        rk4_begin(x, b["ys"], b["yk"])
+        rates(x, st.ids, *self.b_dev, b["k"], self.prm, 0, self.bad, *self.grid.view())
+        for slot, w, c in ((1, 1.0, 0.5 * h), (1, 2.0, 0.5 * h), (2, 2.0, h)):
+            rk4_stage(x, b["ys"], b["k"], b["yk"], w, c)
+            self._rates_at(b["ys"], slot, b["k"], rates, step)
+        rk4_finish(x, b["k"], b["yk"], h / 6.0, st.scratch("pos"))
+        count_nonfinite(st.scratch("pos"), self.bad)
         self._check(step)
         st.swap("pos")
         self.now = step + 1
@@ -338,13 +308,13 @@ class FormationKernel(ModelKernel):
         permute(self.state.ids, self.tmp_ids, g2.perm)
         rates(self.tmp_pos, self.tmp_ids, *self.b_dev, self.tmp_vel, self.prm, slot, self.bad,
               *g2.view())
-        _gather_rows(self.tmp_vel, out, g2.perm)
+        gather_rows(self.tmp_vel, out, g2.perm)
 
     # --- observation ----------------------------------------------------------------------
 
     def _observe_arrays(self, step: int) -> dict[str, np.ndarray]:
         """Positions, rates and neighbour data in storage order at time step * dt."""
-        self._sort(step)
+        self.state.sort(self.grid, step)
         st = self.state
         blend = self._load_times([step * self.dt])
         _, _, observe = self._kernels(blend)
@@ -429,7 +399,7 @@ class FormationKernel(ModelKernel):
         }
 
     def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
-        self._sort(self.now)
+        self.state.sort(self.grid, self.now)
         ids = self.state.ids_numpy()
         out = {}
         if "position" in arrays:

@@ -206,14 +206,7 @@ class VicsekKernel(ModelKernel):
             self.parent_u = ti.ndarray(ti.i32, shape=n)
             reset_parent(self.parent_u)
             self.linked = {"count": 0, "longest": 0, "open_since": 0}
-        self._sorted_for = -1
         self._advanced_for = -1  # the step whose next state observe() already computed
-
-    def _sort(self, step: int) -> None:
-        if self._sorted_for != step:
-            self.grid.build(self.state["pos"], step)
-            self.state.resort(self.grid)
-            self._sorted_for = step
 
     def _advance(self, step: int, with_graph: bool) -> None:
         """Compute the state at step + 1 into the scratch buffers (and, with_graph, the
@@ -232,7 +225,7 @@ class VicsekKernel(ModelKernel):
         self._advanced_for = step
 
     def step(self, step: int) -> None:
-        self._sort(step)
+        self.state.sort(self.grid, step)
         st = self.state
         if self.track:
             self._track_linked(step)
@@ -258,7 +251,7 @@ class VicsekKernel(ModelKernel):
             reset_parent(self.parent_u)
 
     def observe(self, step: int) -> dict[str, float]:
-        self._sort(step)
+        self.state.sort(self.grid, step)
         st = self.state
         e = st["ew"].to_numpy()  # unit vectors e(theta_i); column sums: 15x numpy's sum(0)
         obs = {"polarization": float(np.hypot(e[:, 0].sum(), e[:, 1].sum()) / self.n)}
