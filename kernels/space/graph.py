@@ -39,6 +39,24 @@ def link(parent: ti.template(), u, v):
     return find(parent, v)
 
 
+@ti.func
+def find_serial(parent: ti.template(), x):
+    """The root of x, for one thread per forest (the fused batches: one replica per task)."""
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]  # path halving
+        x = parent[x]
+    return x
+
+
+@ti.func
+def union_serial(parent: ti.template(), u, v):
+    """Join the trees of u and v under the smaller root (one thread per forest)."""
+    ru = find_serial(parent, u)
+    rv = find_serial(parent, v)
+    if ru != rv:
+        parent[ti.max(ru, rv)] = ti.min(ru, rv)
+
+
 @ti.kernel
 def reset_parent(parent: nd):
     for i in range(parent.shape[0]):

@@ -29,7 +29,7 @@ from .. import runtime
 from ..result import SimulationDiverged
 
 nd = ti.types.ndarray()
-_WIDEN = 1.0 + 1e-9
+WIDEN = 1.0 + 1e-9  # cells a hair wider than the radius (see above)
 # Beyond this many cells across, i32 cell coordinates (and float precision) run out.
 MAX_CELLS_ACROSS = 2**30
 PERIODIC_REACH = 1  # cells per radius in the periodic box
@@ -193,7 +193,7 @@ class Grid:
         # about 30 % fewer candidates than r-cells with a 3x3 stencil. The plane's hashed
         # buckets are not contiguous, so there fewer, larger cells win.
         self.reach = PERIODIC_REACH if self.periodic else 1
-        cell = self.radius * _WIDEN / self.reach
+        cell = self.radius * WIDEN / self.reach
         if self.periodic:
             L = float(periodic_L)
             # Cap the cell count near 4 per agent: a sparse box then gets wider cells

@@ -20,11 +20,10 @@ import taichi as ti
 
 from .. import runtime
 from ..result import SimulationDiverged
-from .grid import MAX_CELLS_ACROSS, Grid, bbox_buffer, bounding_box
+from .grid import MAX_CELLS_ACROSS, WIDEN, Grid, bbox_buffer, bounding_box
 
 nd = ti.types.ndarray()
 CELLS_PER_AGENT = 4
-_WIDEN = 1.0 + 1e-9
 
 
 @ti.func
@@ -68,7 +67,7 @@ class DenseGrid:
     def __init__(self, n: int, radius: float):
         self.n = n
         self.radius = float(radius)
-        self.cell = self.radius * _WIDEN
+        self.cell = self.radius * WIDEN
         self.max_cells = CELLS_PER_AGENT * n + 16
         self.key = ti.ndarray(ti.i32, shape=n)
         self.perm = ti.ndarray(ti.i32, shape=n)

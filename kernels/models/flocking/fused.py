@@ -42,14 +42,14 @@ import taichi as ti
 from schemas import Scenario
 
 from ...batch import FusedBatch
+from ...space.graph import find_serial, union_serial
+from ...space.grid import MAX_CELLS_ACROSS, WIDEN
 from . import observe as fo
 from . import potentials
 from .topology import build_edges, to_csr
 
 nd = ti.types.ndarray()
 SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
-_WIDEN = 1.0 + 1e-9  # cells a hair wider than R: rounding can never hide a neighbour
-MAX_CELLS_ACROSS = 2.0**30  # as kernels/space/grid.py: beyond it the swarm has run away
 FAR = 1e300  # "no obstacle within reach", as kernels/models/flocking/navigation.py
 NEAREST_NONE = 1e300
 TWO_PI = 2 * np.pi
@@ -79,22 +79,6 @@ VELOCITY_KEYS = OBS[1:9]
 MISSION_KEYS = OBS[18:]
 Grid = ti.types.vector(6, ti.f64)  # (cells across, cells down, width, x0, y0, extent)
 Acc5 = ti.types.vector(5, ti.f64)
-
-
-@ti.func
-def _find(parent: ti.template(), x):
-    while parent[x] != x:
-        parent[x] = parent[parent[x]]  # path halving
-        x = parent[x]
-    return x
-
-
-@ti.func
-def _union(parent: ti.template(), u, v):
-    ru = _find(parent, u)
-    rv = _find(parent, v)
-    if ru != rv:
-        parent[ti.max(ru, rv)] = ti.min(ru, rv)
 
 
 @ti.func
@@ -407,7 +391,7 @@ def advance_kernel(mode: int):
                 acc[0] += 1.0
                 # own: j in N_i need not imply i in N_j, so every edge is joined from i.
                 if ti.static(mission) or m > k:
-                    _union(parent, k, m)
+                    union_serial(parent, k, m)
             if s2 < r2:
                 acc[3] += potentials.value(s2, q[2], q[3])
                 acc[4] += 1.0
@@ -599,14 +583,14 @@ def advance_kernel(mode: int):
             obs[row, COL["radius_max"]] = rmax
             # Paper 002: each component synchronises on its own.
             for k in range(a0, a0 + n):
-                root = _find(parent, k)
+                root = find_serial(parent, k)
                 csum[root, 0] += ps[k, 2]
                 csum[root, 1] += ps[k, 3]
                 csum[root, 2] += 1.0
             dev = 0.0
             dev_max = 0.0
             for k in range(a0, a0 + n):
-                root = _find(parent, k)
+                root = find_serial(parent, k)
                 cnt = csum[root, 2]
                 e = ti.math.vec2(ps[k, 2] - csum[root, 0] / cnt, ps[k, 3] - csum[root, 1] / cnt)
                 d2 = e.dot(e)
@@ -654,7 +638,7 @@ def advance_kernel(mode: int):
                     oy = 0.0
                     if ti.static(not fixed):
                         if iprm[b, CELLS]:
-                            g = build_cells(a0, n, c0, cap, prm[b, R] * _WIDEN, pos, True,
+                            g = build_cells(a0, n, c0, cap, prm[b, R] * WIDEN, pos, True,
                                             cell, cstart, cidx)
                             if g[0] < 0:
                                 iprm[b, BAD] = s
@@ -783,7 +767,7 @@ def _obstacle_grid(p) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, flo
                    cap=cap)
         return centers, radii, np.zeros(2, dtype=np.int64), geo
     lo, hi = centers.min(axis=0), centers.max(axis=0)
-    w = cap * _WIDEN
+    w = cap * WIDEN
     while (np.floor((hi - lo) / w) + 1).prod() > 4 * m + 16:
         w *= 2.0
     nx, ny = (int(k) for k in np.floor((hi - lo) / w) + 1)

@@ -36,7 +36,7 @@ from schemas import Scenario
 from schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
 
 from ...batch import FusedBatch
-from ...space.grid import _WIDEN as GRID_WIDEN
+from ...space.grid import WIDEN
 from ...space.initial import initial_state
 from .forces import F_KINDS, G_KINDS
 from .fused_observe import COMMON, F1_OBS, F2_OBS, N_OBS, OBS, observe
@@ -232,7 +232,7 @@ class FormationBatch(FusedBatch):
                 f.v_max if isinstance(f, SaturatingF) else 0.0, dt, dt / self.per,
                 *straight[0], *straight[1], straight[2], *straight[3],
                 p.collision_distance or d / 100.0, p.leader_tolerance or d / 100.0,
-                -1.0 if p.lag_sign == "eq8" else 1.0, d * GRID_WIDEN, 0.0]
+                -1.0 if p.lag_sign == "eq8" else 1.0, d * WIDEN, 0.0]
             iprm[b, :] = [sc.time.steps, sc.recording.observables_every, -1, 0, 0,
                           F_KINDS[f.kind], G_KINDS[p.repulsion.kind], int(f1), int(spline),
                           len(chg), len(p.schedule), len(inforce), len(forms)]

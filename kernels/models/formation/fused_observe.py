@@ -4,6 +4,7 @@
 import numpy as np
 import taichi as ti
 
+from ...space.graph import find_serial, union_serial
 from .fused_terms import (
     COLLIDE,
     D2,
@@ -19,7 +20,6 @@ from .fused_terms import (
     D,
     attract,
     attraction_energy,
-    find,
     g_over_s,
     lag_length,
     leader_state,
@@ -98,10 +98,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
                         rep += g_over_s(sd, gk, kg, d, d2) * dv
                         gsum += pair_energy(sd, gk, kg, d, d2)
                     if j > i and not f1:
-                        ri = find(parent, i)
-                        rj = find(parent, j)
-                        if ri != rj:
-                            parent[ti.max(ri, rj)] = ti.min(ri, rj)
+                        union_serial(parent, i, j)
         deg[i] = k
         dsum += k
         li = target(b, i, a0, n, p, ma, mb, ka, kb, iprm, forms)
@@ -161,7 +158,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
         for i in range(a0, a0 + n):
             if deg[i] == 0 and i != lead_k:
                 iso += 1
-            if find(parent, i) == i:
+            if find_serial(parent, i) == i:
                 comps += 1
         obs[row, 20] = ti.cast(iso == 0, ti.f64)  # D2
         obs[row, 22] = iso
@@ -173,7 +170,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
             pk = pos[k, 0] - p[0]
             qk = pos[k, 1] - p[1]
             if ti.sqrt(pk * pk + qk * qk) > tol:
-                root = find(parent, k)
+                root = find_serial(parent, k)
                 best = ti.math.inf
                 best_m = -1
                 first = ti.math.inf
@@ -181,7 +178,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
                 for m in range(a0, a0 + n):
                     pm = pos[m, 0] - p[0]
                     qm = pos[m, 1] - p[1]
-                    if ti.sqrt(pm * pm + qm * qm) > tol and find(parent, m) == root:
+                    if ti.sqrt(pm * pm + qm * qm) > tol and find_serial(parent, m) == root:
                         am = ang[m]
                         if am < first or (am == first and m < first_m):
                             first = am

@@ -5,6 +5,7 @@ check."""
 
 import taichi as ti
 
+from ...space.grid import MAX_CELLS_ACROSS
 from .forces import F_KINDS, G_KINDS
 
 # Per-replica parameter slots: prm (f64) and iprm (i32).
@@ -13,15 +14,6 @@ from .forces import F_KINDS, G_KINDS
 N_PRM = 20
 (STEPS, EVERY, BAD, CAUSE, NOBS, FKIND, GKIND, F1, SPLINE, C0, NC, I0, F0) = range(13)
 N_IPRM = 13
-MAX_CELLS_ACROSS = 2.0**30  # as kernels/space/grid.py
-
-
-@ti.func
-def find(parent: ti.template(), x):
-    while parent[x] != x:
-        parent[x] = parent[parent[x]]  # path halving
-        x = parent[x]
-    return x
 
 
 @ti.func

@@ -31,11 +31,12 @@ from schemas import PeriodicBox, Scenario, VicsekParams
 
 from ...batch import FusedBatch
 from ...space import rng
+from ...space.graph import union_serial
+from ...space.grid import MAX_CELLS_ACROSS, WIDEN
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
 ALL_PAIRS_N = 48  # at or below this N every pair is tested (fewer operations than cells)
-_WIDEN = 1.0 + 1e-9  # cells a hair wider than r: rounding can never hide a neighbour
 SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
 TWO_PI = 2 * np.pi
 
@@ -52,27 +53,10 @@ CAUSES = (
     ("position", "the swarm spans over 2^30 neighbour radii (agents escaping: dt too large "
                  "or forces unbounded), or a position became non-finite"),
 )
-MAX_CELLS_ACROSS = 2.0**30  # as kernels/space/grid.py: beyond it the swarm has run away
 # Observable columns, in the order the per-step path reports them.
 OBS = ("step", "polarization", "heading_spread", "leader_error", "components",
        "degree_mean", "degree_min", "degree_max", "isolated", "linked_intervals")
 N_OBS = len(OBS)
-
-
-@ti.func
-def _find(parent: ti.template(), x):
-    while parent[x] != x:
-        parent[x] = parent[parent[x]]  # path halving
-        x = parent[x]
-    return x
-
-
-@ti.func
-def _union(parent: ti.template(), u, v):
-    ru = _find(parent, u)
-    rv = _find(parent, v)
-    if ru != rv:
-        parent[ti.max(ru, rv)] = ti.min(ru, rv)
 
 
 @ti.func
@@ -112,7 +96,7 @@ def advance_kernel(rule: int, periodic: bool):
         nx = 0: no grid, visit all pairs."""
         nx = 0
         ny = 0
-        w = r * _WIDEN
+        w = r * WIDEN
         ox = 0.0
         oy = 0.0
         if ti.static(periodic):
@@ -184,9 +168,9 @@ def advance_kernel(rule: int, periodic: bool):
         if ti.static(links):
             if w > 0.0 and m > k:  # each edge once
                 if graph:
-                    _union(parent, cidx[k], cidx[m])
+                    union_serial(parent, cidx[k], cidx[m])
                 if track:
-                    _union(parent_u, cidx[k], cidx[m])
+                    union_serial(parent_u, cidx[k], cidx[m])
         return a + w * ti.math.vec3(ps[m, 2], ps[m, 3], 1.0)
 
     @ti.func
