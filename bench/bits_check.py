@@ -1,13 +1,14 @@
 """Bit-identity guard for engine refactors: hash every example and preset's final state.
 
-Runs every scenario in `examples/*.json` (sweeps are skipped) and every registered preset on
+Runs every scenario in `examples/*.json` (sweeps are skipped) and every registered preset,
+plus an RK4 twin of each that integrates with Euler (none of them uses RK4 itself), on
 each engine path that applies to it (the per-step path always; the fused small-N path where
 `kernels.engine.fused_batch` picks it), and writes one JSON object
 per case: sha256 of the final per-agent arrays (position, velocity, heading: those the
-model has) and of every observable series. Scenarios of up to `--full-n` agents run their
-full length (formation changes, obstacle passages and convergence included); larger ones
-stop after `--steps` steps, which keeps the whole check to a few minutes. A pure move of
-code must leave every hash unchanged:
+model has) and of every observable series. Runs are cut to `--steps` steps (default 1000),
+and those of more than `--large-n` agents to `--large-steps` (default 150), which keeps the
+whole check to a few minutes on two cores. A pure move of code must leave every hash
+unchanged:
 
     python bench/bits_check.py --out base.json                  # on the old code
     python bench/bits_check.py --out new.json --compare base.json   # on the new code
@@ -52,10 +53,11 @@ def digest(a: np.ndarray) -> str:
     return h.hexdigest()
 
 
-def scenarios(max_steps: int, full_n: int) -> Iterator[tuple[str, dict[str, Any]]]:
+def scenarios(max_steps: int, large_n: int, large_steps: int
+              ) -> Iterator[tuple[str, dict[str, Any]]]:
     """(case name, scenario document) for every example scenario and preset, with the step
-    count of those over `full_n` agents cut to `max_steps`, and the final frame of every
-    per-agent array recorded."""
+    count cut to `max_steps` (`large_steps` above `large_n` agents), and the final frame of
+    every per-agent array recorded."""
     from schemas import Scenario
     from schemas.presets import PRESETS, get_preset
 
@@ -64,13 +66,15 @@ def scenarios(max_steps: int, full_n: int) -> Iterator[tuple[str, dict[str, Any]
         doc = json.loads(path.read_text())
         if "base" in doc and "axes" in doc:  # a sweep, not a scenario
             continue
-        docs.append((f"example:{path.stem}", doc))
+        docs.append((f"example:{path.stem}", Scenario.model_validate(doc).model_dump(mode="json")))
     for name in sorted(PRESETS):
         docs.append((f"preset:{name}", get_preset(name).model_dump(mode="json")))
+    docs += [(f"{name}+rk4", {**doc, "model": {**doc["model"], "integrator": "rk4"}})
+             for name, doc in list(docs)
+             if doc["model"].get("integrator") in ("euler", "semi_implicit_euler")]
     for name, doc in docs:
-        steps = doc["time"]["steps"]
-        if Scenario.model_validate(doc).n_agents > full_n:
-            steps = min(steps, max_steps)
+        large = Scenario.model_validate(doc).n_agents > large_n
+        steps = min(doc["time"]["steps"], large_steps if large else max_steps)
         doc["time"] = {**doc["time"], "steps": steps}
         doc["recording"] = {**doc.get("recording", {}), "every": steps, "arrays": ARRAYS,
                             "observables_every": 1}
@@ -134,10 +138,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=Path("bits.json"), help="result JSON to write")
     ap.add_argument("--compare", type=Path, help="baseline JSON: exit 1 on any mismatch")
-    ap.add_argument("--steps", type=int, default=150,
-                    help="step cap of the scenarios over --full-n agents (default 150)")
-    ap.add_argument("--full-n", type=int, default=1000,
-                    help="scenarios of up to this many agents run in full (default 1000)")
+    ap.add_argument("--steps", type=int, default=1000, help="step cap (default 1000)")
+    ap.add_argument("--large-n", type=int, default=1000,
+                    help="scenarios of more agents are cut to --large-steps (default 1000)")
+    ap.add_argument("--large-steps", type=int, default=150,
+                    help="step cap of the large scenarios (default 150)")
     args = ap.parse_args(argv)
 
     from kernels import runtime
@@ -145,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     runtime.ensure("cpu")
     results: dict[str, Any] = {}
     t0 = time.perf_counter()
-    for name, doc in scenarios(args.steps, args.full_n):
+    for name, doc in scenarios(args.steps, args.large_n, args.large_steps):
         for path in paths_for(doc):
             t = time.perf_counter()
             results[f"{name}[{path}]"] = run_case(doc, path)
