@@ -22,14 +22,15 @@ import taichi as ti
 
 from ...space.graph import find, link
 from ...space.grid import make_visitor, within
+from ...space.params import Slots
 from ...space.plane_grid import make_dense_visitor
 from . import potentials
 from .navigation import make_navigation
 
 nd = ti.types.ndarray()
-# Slots of the force parameter array.
-P_DT, P_A, P_C, P_R2, P_CD, P_VMIN, P_STUCK2, P_FLOOR = range(8)
-P_SIZE = 8
+# The force parameter array: dt, the potential's a and c, R^2 (uniform radius); M3's c_d,
+# V_min, the stuck speed squared and the radius floor.
+P = Slots("DT", "A", "C", "R2", "CD", "VMIN", "STUCK2", "FLOOR")
 UNIFORM, OWN, MIN = 0, 1, 2
 RADIUS_RULES = {"uniform": UNIFORM, "own": OWN, "min": MIN}
 NO_DAMPING, ABOVE_VMIN, BELOW_VMIN, EVERYWHERE = 0, 1, 2, 3
@@ -40,7 +41,7 @@ NEAREST_NONE = 1e300
 @ti.func
 def pair_radius2(rule: ti.template(), i, k, rad: ti.template(), prm: ti.template()):
     """R_ij^2 for the rule (uniform R from prm, else the per-agent radii)."""
-    r2 = prm[P_R2]
+    r2 = prm[P.R2]
     if ti.static(rule == OWN):
         r2 = rad[i] * rad[i]
     elif ti.static(rule == MIN):
@@ -95,7 +96,7 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
         other = k != i
         w = ti.cast(within(s2, r2, inclusive) & other, ti.f64)  # j in N_i
         # U_ij = V(s) below R, constant (no force) from R on; select drops f(0) = inf.
-        f = ti.select((s2 < r2) & other, potentials.force_factor(s2, prm[P_A]), 0.0)
+        f = ti.select((s2 < r2) & other, potentials.force_factor(s2, prm[P.A]), 0.0)
         return acc + ti.math.vec3(w * vel[k, 0] + f * d[0], w * vel[k, 1] + f * d[1], w)
 
     visit = visitor(pair, search)
@@ -109,13 +110,13 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
             nv = navigation(xi, nav, OB)
             acc -= ti.math.vec2(nv[1], nv[2])
             if ti.static(damping == EVERYWHERE):
-                acc -= prm[P_CD] * vi
+                acc -= prm[P.CD] * vi
             elif ti.static(damping == ABOVE_VMIN):
-                if nv[0] > prm[P_VMIN]:
-                    acc -= prm[P_CD] * vi
+                if nv[0] > prm[P.VMIN]:
+                    acc -= prm[P.CD] * vi
             elif ti.static(damping == BELOW_VMIN):
-                if nv[0] <= prm[P_VMIN]:
-                    acc -= prm[P_CD] * vi
+                if nv[0] <= prm[P.VMIN]:
+                    acc -= prm[P.CD] * vi
         return acc
 
     @ti.kernel
@@ -127,8 +128,8 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
             vi = ti.math.vec2(vel[i, 0], vel[i, 1])
             u = control(i, xi, vi, pos, vel, rad, prm, nav, ti.static((start, cid, gf, gi)),
                         ti.static((opos, orad, ostart, ocid, ogf, ogi)))
-            v = vi + prm[P_DT] * u
-            x = xi + prm[P_DT] * v
+            v = vi + prm[P.DT] * u
+            x = xi + prm[P.DT] * v
             pos_out[i, 0], pos_out[i, 1] = x[0], x[1]
             vel_out[i, 0], vel_out[i, 1] = v[0], v[1]
             if nonfinite(x, v):
@@ -158,7 +159,7 @@ def _csr_control(i, xi, vi, pos: ti.template(), vel: ti.template(), indptr: ti.t
         j = indices[e]
         d = ti.math.vec2(pos[j, 0] - xi[0], pos[j, 1] - xi[1])
         acc += ti.math.vec2(vel[j, 0] - vi[0], vel[j, 1] - vi[1])
-        acc += potentials.force_factor(d.dot(d), prm[P_A]) * d
+        acc += potentials.force_factor(d.dot(d), prm[P.A]) * d
     return acc
 
 
@@ -169,8 +170,8 @@ def csr_euler(pos: nd, vel: nd, pos_out: nd, vel_out: nd, indptr: nd, indices: n
     for i in range(pos.shape[0]):
         xi = ti.math.vec2(pos[i, 0], pos[i, 1])
         vi = ti.math.vec2(vel[i, 0], vel[i, 1])
-        v = vi + prm[P_DT] * _csr_control(i, xi, vi, pos, vel, indptr, indices, prm)
-        x = xi + prm[P_DT] * v
+        v = vi + prm[P.DT] * _csr_control(i, xi, vi, pos, vel, indptr, indices, prm)
+        x = xi + prm[P.DT] * v
         pos_out[i, 0], pos_out[i, 1] = x[0], x[1]
         vel_out[i, 0], vel_out[i, 1] = v[0], v[1]
         if nonfinite(x, v):
@@ -197,7 +198,7 @@ def csr_potential(pos: nd, indptr: nd, indices: nd, prm: nd, pot: nd):
         for e in range(indptr[i], indptr[i + 1]):
             j = indices[e]
             d = ti.math.vec2(pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1])
-            acc += potentials.value(d.dot(d), prm[P_A], prm[P_C])
+            acc += potentials.value(d.dot(d), prm[P.A], prm[P.C])
         pot[i] = acc
 
 
@@ -237,9 +238,9 @@ def grid_observe_kernel(rule: int, inclusive: bool, search: str):
                     if rk != root:
                         acc[O_ROOT] = ti.cast(link(parent, root, rk), ti.f64)
             if s2 < r2:
-                acc[O_VSUM] += potentials.value(s2, prm[P_A], prm[P_C])
+                acc[O_VSUM] += potentials.value(s2, prm[P.A], prm[P.C])
                 if ti.static(rule == MIN):  # R_ij varies with j
-                    acc[O_VSUM] -= potentials.value(r2, prm[P_A], prm[P_C])
+                    acc[O_VSUM] -= potentials.value(r2, prm[P.A], prm[P.C])
                 else:
                     acc[O_NSAT] += 1.0
         return acc
@@ -260,7 +261,7 @@ def grid_observe_kernel(rule: int, inclusive: bool, search: str):
             near_k[i] = ti.cast(acc[O_NEAR_K], ti.i32)
             # V(R_i) once per agent: R_i is R (uniform) or agent i's own radius.
             r2 = pair_radius2(rule, i, i, rad, prm)
-            pot[i] = acc[O_VSUM] - acc[O_NSAT] * potentials.value(r2, prm[P_A], prm[P_C])
+            pot[i] = acc[O_VSUM] - acc[O_NSAT] * potentials.value(r2, prm[P.A], prm[P.C])
 
     return observe
 
@@ -287,8 +288,8 @@ def radius_kernel(rule: int, inclusive: bool, search: str):
             r = rad[i]
             speed2 = vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1]
             new = r
-            if speed2 < prm[P_STUCK2] and mission[i, 0] > prm[P_VMIN]:
-                new = ti.max(0.5 * r, prm[P_FLOOR])
+            if speed2 < prm[P.STUCK2] and mission[i, 0] > prm[P.VMIN]:
+                new = ti.max(0.5 * r, prm[P.FLOOR])
                 if new < r:
                     ti.atomic_add(counts[0], 1)
             else:

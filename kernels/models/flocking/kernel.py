@@ -40,12 +40,8 @@ from ...space.state import SortedState
 from . import observe as fo
 from .forces import (
     NO_DAMPING,
-    P_A,
-    P_C,
-    P_DT,
-    P_R2,
-    P_SIZE,
     RADIUS_RULES,
+    P,
     csr_accel,
     csr_euler,
     csr_potential,
@@ -54,7 +50,7 @@ from .forces import (
     root_labels,
 )
 from .fused import FlockingBatch
-from .navigation import NAV_SIZE, ObstacleGrid
+from .navigation import NAV, ObstacleGrid
 from .topology import build_edges, to_csr
 
 DIVERGED_CAUSE = (
@@ -85,7 +81,7 @@ class FlockingKernel(ModelKernel):
         self.a, self.c = p.potential.coefficients()
         self.fixed = self._fixed_topology()
         self.state = SortedState(self._initial_arrays(initial_state(scenario)))
-        self.prm = _f64(P_SIZE)
+        self.prm = _f64(P.size)
         self.prm.from_numpy(self._parameters())
         self.bad = _i32(1)
         self.pot = _f64(n)
@@ -108,11 +104,8 @@ class FlockingKernel(ModelKernel):
         return {"pos": init.positions, "vel": init.velocities}
 
     def _parameters(self) -> np.ndarray:
-        prm = np.zeros(P_SIZE)
-        prm[P_DT], prm[P_A], prm[P_C] = self.dt, self.a, self.c
-        if not self.fixed:
-            prm[P_R2] = self.scenario.neighbours.radius ** 2
-        return prm
+        r2 = 0.0 if self.fixed else self.scenario.neighbours.radius ** 2
+        return P.pack(DT=self.dt, A=self.a, C=self.c, R2=r2)
 
     def _grid_flags(self) -> dict[str, Any]:
         """Compile-time choices of the grid kernels."""
@@ -122,7 +115,7 @@ class FlockingKernel(ModelKernel):
     def _init_navigation(self) -> None:
         """No mission potential: empty obstacle grid and parameters (never read)."""
         self.obstacles = ObstacleGrid(np.zeros((0, 2)), np.zeros(0), 1.0)
-        self.nav = _f64(NAV_SIZE)
+        self.nav = _f64(NAV.size)
 
     def _before_motion(self, step: int) -> None:
         """Runs after sorting, before the step's motion (M3: the adaptive radius)."""

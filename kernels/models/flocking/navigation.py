@@ -24,23 +24,21 @@ import numpy as np
 import taichi as ti
 
 from ...space.grid import Grid, make_visitor
+from ...space.params import Slots
 
 nd = ti.types.ndarray()
-# Slots of the navigation parameter array.
-NAV_RANGE, NAV_LAMBDA, NAV_KAPPA, NAV_DX, NAV_DY, NAV_X0, NAV_Y0, NAV_X1, NAV_Y1 = range(9)
-NAV_SIZE = 9
+# The navigation parameter array: the obstacle range and its lambda, kappa, the destination
+# (DX, DY), and the obstacles' bounding box (X0, Y0, X1, Y1).
+NAV = Slots("RANGE", "LAMBDA", "KAPPA", "DX", "DY", "X0", "Y0", "X1", "Y1")
 # "No obstacle within reach" for the minimum boundary distance.
 FAR = 1e300
 
 
 def nav_parameters(destination, obstacle_range: float, kappa: float, bbox) -> np.ndarray:
-    prm = np.zeros(NAV_SIZE)
-    prm[NAV_RANGE] = obstacle_range
-    prm[NAV_LAMBDA] = (obstacle_range**2 + 1.0) / obstacle_range**2
-    prm[NAV_KAPPA] = kappa
-    prm[NAV_DX], prm[NAV_DY] = destination
-    prm[NAV_X0:NAV_Y1 + 1] = bbox
-    return prm
+    x0, y0, x1, y1 = bbox
+    return NAV.pack(RANGE=obstacle_range, LAMBDA=(obstacle_range**2 + 1.0) / obstacle_range**2,
+                    KAPPA=kappa, DX=destination[0], DY=destination[1], X0=x0, Y0=y0, X1=x1,
+                    Y1=y1)
 
 
 class ObstacleGrid:
@@ -80,12 +78,12 @@ def _obstacle_pair(i, k, d, acc, S: ti.template()):
     dist = ti.sqrt(d.dot(d))
     delta = dist - orad[k]
     acc[3] = ti.min(acc[3], delta)
-    rng = nav[NAV_RANGE]
+    rng = nav[NAV.RANGE]
     if delta * delta < rng * rng:  # m = 1; otherwise m = 0 and beta = 1
         e = delta - rng
         q = e * e + 1.0
-        beta = 1.0 - nav[NAV_LAMBDA] * e * e / q
-        dbeta = -2.0 * nav[NAV_LAMBDA] * e / (q * q)  # d beta / d delta
+        beta = 1.0 - nav[NAV.LAMBDA] * e * e / q
+        dbeta = -2.0 * nav[NAV.LAMBDA] * e / (q * q)  # d beta / d delta
         g = (-dbeta / dist) * d  # grad_x beta = dbeta (x - r_o) / |x - r_o|
         b = acc[0]
         acc[1] = acc[1] * beta + b * g[0]
@@ -107,14 +105,14 @@ def make_navigation(has_obstacles: bool, unit_kappa: bool):
         acc = ti.math.vec4(1.0, 0.0, 0.0, FAR)
         if ti.static(has_obstacles):
             opos, orad, start, cid, gf, gi = ti.static(OB[0], OB[1], OB[2], OB[3], OB[4], OB[5])
-            inside = (nav[NAV_X0] <= xi[0]) & (xi[0] <= nav[NAV_X1]) & (nav[NAV_Y0] <= xi[1]) \
-                & (xi[1] <= nav[NAV_Y1])
+            inside = (nav[NAV.X0] <= xi[0]) & (xi[0] <= nav[NAV.X1]) & (nav[NAV.Y0] <= xi[1]) \
+                & (xi[1] <= nav[NAV.Y1])
             if inside:
                 acc = _visit_obstacles(0, xi, acc, opos, ti.static((start, cid, gf, gi)),
                                        ti.static((orad, nav)), False)
         b = acc[0]
         gb = ti.math.vec2(acc[1], acc[2])
-        y = ti.math.vec2(xi[0] - nav[NAV_DX], xi[1] - nav[NAV_DY])
+        y = ti.math.vec2(xi[0] - nav[NAV.DX], xi[1] - nav[NAV.DY])
         a = y.dot(y)
         v = 0.0
         g = ti.math.vec2(0.0)
@@ -123,7 +121,7 @@ def make_navigation(has_obstacles: bool, unit_kappa: bool):
             v = a / dd
             g = (2.0 * b * y - a * gb) / (dd * dd)
         else:
-            kappa = nav[NAV_KAPPA]
+            kappa = nav[NAV.KAPPA]
             dd = ti.pow(a, kappa) + b
             dk = ti.pow(dd, -1.0 / kappa)
             v = a * dk

@@ -22,17 +22,9 @@ from schemas import Scenario
 from ...model import register_kernel
 from ...space.initial import InitialState
 from . import observe as fo
-from .forces import (
-    DAMPING,
-    P_CD,
-    P_FLOOR,
-    P_STUCK2,
-    P_VMIN,
-    RADIUS_RULES,
-    radius_kernel,
-)
+from .forces import DAMPING, RADIUS_RULES, P, radius_kernel
 from .kernel import FlockingKernel, _f64, _i32
-from .navigation import NAV_SIZE, ObstacleGrid, nav_eval_kernel, nav_parameters
+from .navigation import NAV, ObstacleGrid, nav_eval_kernel, nav_parameters
 
 
 @register_kernel
@@ -58,8 +50,8 @@ class ObstacleFlockingKernel(FlockingKernel):
     def _parameters(self) -> np.ndarray:
         prm = super()._parameters()
         p = self.p
-        prm[P_CD], prm[P_VMIN] = p.c_d, p.V_min
-        prm[P_STUCK2], prm[P_FLOOR] = p.stuck_speed**2, p.radius_floor
+        prm[P.CD], prm[P.VMIN] = p.c_d, p.V_min
+        prm[P.STUCK2], prm[P.FLOOR] = p.stuck_speed**2, p.radius_floor
         return prm
 
     def _grid_flags(self) -> dict[str, Any]:
@@ -74,7 +66,7 @@ class ObstacleFlockingKernel(FlockingKernel):
                            dtype=np.float64).reshape(-1, 2)
         radii = np.array([0.0] * len(p.obstacles) + [d.radius for d in p.discs])
         self.obstacles = ObstacleGrid(centers, radii, p.obstacle_range)
-        self.nav = _f64(NAV_SIZE)
+        self.nav = _f64(NAV.size)
         self.nav.from_numpy(nav_parameters(p.destination, p.obstacle_range, p.kappa,
                                            self.obstacles.bbox))
 

@@ -21,7 +21,7 @@ from functools import cache
 import taichi as ti
 
 from ...space.grid import plane_bucket, plane_cell, plane_cell_id, within
-from .forces import P_D2, P_DT, attract, g_over_s, leader
+from .forces import P, attract, g_over_s, leader
 
 nd = ti.types.ndarray()
 M_MAX = 16
@@ -72,7 +72,7 @@ def coarse_euler(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: bool)
             if cid[k] == want and k != i:
                 dv = ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] - xi[1])
                 d2 = dv.dot(dv)
-                if within(d2, prm[P_D2], inclusive):
+                if within(d2, prm[P.D2], inclusive):
                     if d2 > 0.0:
                         w = g_over_s(ti.sqrt(d2), prm, gkind)
                         acc += ti.math.vec3(w * dv[0], w * dv[1], 0.0)
@@ -87,7 +87,7 @@ def coarse_euler(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: bool)
             xi = ti.math.vec2(pos[i, 0], pos[i, 1])
             c = plane_cell(xi[0], xi[1], gf)
             h = gf[0]
-            r2 = prm[P_D2]
+            r2 = prm[P.D2]
             acc = ti.math.vec3(0.0)
             for a in range(-m, m + 1):
                 tx = c[0] + a
@@ -113,8 +113,8 @@ def coarse_euler(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: bool)
                         elif hi > lo and (own or agg[bucket, 2] < 0.5):
                             acc = exact_cell(i, xi, acc, lo, hi, want, pos, cid, prm)
             v = attract(leader(i, ids, ba, bb, prm, 0, f1, blend) - xi, prm, fkind)
-            x = xi[0] + prm[P_DT] * (v[0] + acc[0])
-            y = xi[1] + prm[P_DT] * (v[1] + acc[1])
+            x = xi[0] + prm[P.DT] * (v[0] + acc[0])
+            y = xi[1] + prm[P.DT] * (v[1] + acc[1])
             pos_out[i, 0] = x
             pos_out[i, 1] = y
             if acc[2] > 0.0:

@@ -19,36 +19,39 @@ import taichi as ti
 
 from schemas.formation import FormationParams, LinearF, QuadraticF, SaturatingF
 
+from ...space.params import Slots
+
 F_KINDS = {"linear": 0, "quadratic": 1, "saturating": 2}
 G_KINDS = {"inverse": 0, "inverse_square": 1}
-# prm slots shared by every formation kernel: the gains, then per time slot s (0: t,
-# 1: t + dt/2, 2: t + dt) the leader p(t) and the 2x2 weights of the two stored formations
-# A and B (F1 only).
-P_FA, P_FB, P_KG, P_D, P_D2, P_DT = range(6)
-SLOT0, SLOT_LEN = 8, 10
+# One time slot's leader data: p(t) and the 2x2 weights (row-major) of the two stored
+# formations A and B (F1 only).
+LEAD = Slots("PX", "PY", "A00", "A01", "A10", "A11", "B00", "B01", "B10", "B11")
+# The parameter array of every formation kernel: the gains, then LEAD for each of the three
+# time slots s (0: t, 1: t + dt/2, 2: t + dt).
+P = Slots("FA", "FB", "KG", "D", "D2", "DT", LEAD=3 * LEAD.size)
 
 
 def force_params(p: FormationParams, d: float, dt: float) -> np.ndarray:
-    """The gains in the slot order above."""
+    """The parameter array with the gains set (the time slots zero)."""
     f = p.attraction
     fa = f.c if isinstance(f, QuadraticF) else f.k
     fb = f.v_max if isinstance(f, SaturatingF) else 0.0
-    return np.array([fa, fb, p.repulsion.k_g, d, d * d, dt], dtype=np.float64)
+    return P.pack(FA=fa, FB=fb, KG=p.repulsion.k_g, D=d, D2=d * d, DT=dt)
 
 
 @ti.func
 def leader(i, ids: ti.template(), ba: ti.template(), bb: ti.template(), prm: ti.template(),
            slot, f1: ti.template(), blend: ti.template()):
     """l_i = p(t) (F2) or p(t) + M_A A[id] + M_B B[id] (F1)."""
-    o = SLOT0 + SLOT_LEN * slot
-    r = ti.math.vec2(prm[o], prm[o + 1])
+    o = P.LEAD + LEAD.size * slot
+    r = ti.math.vec2(prm[o + LEAD.PX], prm[o + LEAD.PY])
     if ti.static(f1):
         a = ids[i]
-        r += ti.math.vec2(prm[o + 2] * ba[a, 0] + prm[o + 3] * ba[a, 1],
-                          prm[o + 4] * ba[a, 0] + prm[o + 5] * ba[a, 1])
+        r += ti.math.vec2(prm[o + LEAD.A00] * ba[a, 0] + prm[o + LEAD.A01] * ba[a, 1],
+                          prm[o + LEAD.A10] * ba[a, 0] + prm[o + LEAD.A11] * ba[a, 1])
         if ti.static(blend):
-            r += ti.math.vec2(prm[o + 6] * bb[a, 0] + prm[o + 7] * bb[a, 1],
-                              prm[o + 8] * bb[a, 0] + prm[o + 9] * bb[a, 1])
+            r += ti.math.vec2(prm[o + LEAD.B00] * bb[a, 0] + prm[o + LEAD.B01] * bb[a, 1],
+                              prm[o + LEAD.B10] * bb[a, 0] + prm[o + LEAD.B11] * bb[a, 1])
     return r
 
 
@@ -57,13 +60,13 @@ def attract(z, prm: ti.template(), fkind: ti.template()):
     """f(|z|) z / |z|."""
     v = ti.math.vec2(0.0)
     if ti.static(fkind == F_KINDS["linear"]):
-        v = prm[P_FA] * z
+        v = prm[P.FA] * z
     elif ti.static(fkind == F_KINDS["quadratic"]):
-        v = prm[P_FA] * (ti.sqrt(z.dot(z)) + 1.0) * z
+        v = prm[P.FA] * (ti.sqrt(z.dot(z)) + 1.0) * z
     else:
         s = ti.sqrt(z.dot(z))
         if s > 0.0:
-            v = (prm[P_FB] * ti.tanh(prm[P_FA] * s / prm[P_FB]) / s) * z
+            v = (prm[P.FB] * ti.tanh(prm[P.FA] * s / prm[P.FB]) / s) * z
     return v
 
 
@@ -72,21 +75,21 @@ def g_over_s(s, prm: ti.template(), gkind: ti.template()):
     """g(s) / s for 0 < s < d."""
     r = 0.0
     if ti.static(gkind == G_KINDS["inverse"]):
-        r = -prm[P_KG] * (1.0 / s - 1.0 / prm[P_D]) / s
+        r = -prm[P.KG] * (1.0 / s - 1.0 / prm[P.D]) / s
     else:
-        r = -prm[P_KG] * (1.0 / (s * s) - 1.0 / prm[P_D2]) / s
+        r = -prm[P.KG] * (1.0 / (s * s) - 1.0 / prm[P.D2]) / s
     return r
 
 
 @ti.func
 def pair_energy(s, prm: ti.template(), gkind: ti.template()):
     """G(s) = int_d^s g(sigma) dsigma >= 0 for 0 < s < d."""
-    d = prm[P_D]
+    d = prm[P.D]
     e = 0.0
     if ti.static(gkind == G_KINDS["inverse"]):
-        e = prm[P_KG] * (ti.log(d / s) + s / d - 1.0)
+        e = prm[P.KG] * (ti.log(d / s) + s / d - 1.0)
     else:
-        e = prm[P_KG] * (1.0 / s + s / prm[P_D2] - 2.0 / d)
+        e = prm[P.KG] * (1.0 / s + s / prm[P.D2] - 2.0 / d)
     return e
 
 

@@ -35,10 +35,8 @@ from .dense import bucket_aggregates, coarse_euler, max_count, stencil_reach
 from .forces import (
     F_KINDS,
     G_KINDS,
-    P_D2,
-    P_DT,
-    SLOT0,
-    SLOT_LEN,
+    LEAD,
+    P,
     attract,
     attraction_energy,
     force_params,
@@ -64,7 +62,7 @@ def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: 
     def pair_rate(i, k, dv, acc, S: ti.template()):
         prm = ti.static(S[0])
         d2 = dv.dot(dv)
-        if k != i and within(d2, prm[P_D2], inclusive):
+        if k != i and within(d2, prm[P.D2], inclusive):
             if d2 > 0.0:
                 w = g_over_s(ti.sqrt(d2), prm, gkind)
                 acc += ti.math.vec3(w * dv[0], w * dv[1], 0.0)
@@ -79,7 +77,7 @@ def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: 
         d2 = dv.dot(dv)
         if k != i:
             acc[5] = ti.min(acc[5], d2)
-            if within(d2, prm[P_D2], inclusive):
+            if within(d2, prm[P.D2], inclusive):
                 acc[3] += 1.0
                 if d2 > 0.0:
                     s = ti.sqrt(d2)
@@ -116,8 +114,8 @@ def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: 
               start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
             r = rate(i, pos, ids, ba, bb, prm, 0, ti.static((start, cid, gf, gi)))
-            x = pos[i, 0] + prm[P_DT] * r[0]
-            y = pos[i, 1] + prm[P_DT] * r[1]
+            x = pos[i, 0] + prm[P.DT] * r[0]
+            y = pos[i, 1] + prm[P.DT] * r[1]
             pos_out[i, 0] = x
             pos_out[i, 1] = y
             flag(bad, x, y, r[2])
@@ -175,8 +173,7 @@ class FormationKernel(ModelKernel):
         self.state = SortedState({"pos": init.positions})
         self.grid = Grid(n, d, None)
         self.graph: MetricGraph | None = None
-        self.prm_host = np.zeros(SLOT0 + 3 * SLOT_LEN)
-        self.prm_host[: SLOT0 - 2] = force_params(p, d, dt)
+        self.prm_host = force_params(p, d, dt)
         self.prm = ti.ndarray(ti.f64, shape=self.prm_host.shape)
         rows = n if self.f1 else 1
         self.b_dev = [ti.ndarray(ti.f64, shape=(rows, 2)) for _ in range(2)]
@@ -213,11 +210,11 @@ class FormationKernel(ModelKernel):
                 self.b_dev[free].from_numpy(self.schedule.stored[k])
                 self.b_held[free] = k
         for s, (t, w) in enumerate(zip(times, weights, strict=True)):
-            o = SLOT0 + SLOT_LEN * s
-            self.prm_host[o: o + 2] = self.path.position(t)
+            o = P.LEAD + LEAD.size * s
+            self.prm_host[o + LEAD.PX: o + LEAD.PY + 1] = self.path.position(t)
             mats = [w.get(self.b_held[j], np.zeros((2, 2))) for j in range(2)]
-            self.prm_host[o + 2: o + 6] = mats[0].ravel()
-            self.prm_host[o + 6: o + 10] = mats[1].ravel()
+            self.prm_host[o + LEAD.A00: o + LEAD.A11 + 1] = mats[0].ravel()
+            self.prm_host[o + LEAD.B00: o + LEAD.B11 + 1] = mats[1].ravel()
         self.prm.from_numpy(self.prm_host)
         return any(self.b_held[1] in w for w in weights)
 

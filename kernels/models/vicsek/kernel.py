@@ -27,13 +27,14 @@ from ...space import rng
 from ...space.graph import MetricGraph, count_roots, find, link, reset_parent
 from ...space.grid import Grid, make_visitor, within
 from ...space.initial import initial_state
+from ...space.params import Slots
 from ...space.state import SortedState
 from .fused import VicsekBatch
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
-# prm slots
-_R2, _V0DT, _ETA, _G, _L, _THETA0 = range(6)
+# The parameter array: r^2, v0 dt, eta, g (laplacian), L (periodic box), theta_0 (leader).
+P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0")
 _TWO_PI = 2 * np.pi
 
 
@@ -83,7 +84,7 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
     def pair(i, k, d, acc, S: ti.template()):
         ew, theta, prm, parent = ti.static(S[0], S[1], S[2], S[3])
         # Branch-free accumulation: w is 1 for a neighbour, 0 otherwise.
-        w = ti.cast(within(d.dot(d), prm[_R2], inclusive), ti.f64)
+        w = ti.cast(within(d.dot(d), prm[P.R2], inclusive), ti.f64)
         if ti.static(rule == RULES["vicsek"]):
             acc += w * ti.math.vec3(ew[k, 0], ew[k, 1], 1.0)
         else:
@@ -118,11 +119,11 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
                 if nrm > 0.0:  # arg(0) = 0, as atan2(0, 0)
                     e_new = ti.math.vec2(acc[0], acc[1]) / nrm
             elif ti.static(rule == RULES["laplacian"]):
-                new = th - (acc[2] * th - acc[0]) / prm[_G]
+                new = th - (acc[2] * th - acc[0]) / prm[P.G]
             else:
                 new = acc[0] / acc[2]
-            if prm[_ETA] > 0.0:
-                noise = prm[_ETA] * (rng.uniform(key, ids[i]) - 0.5)
+            if prm[P.ETA] > 0.0:
+                noise = prm[P.ETA] * (rng.uniform(key, ids[i]) - 0.5)
                 if ti.static(rule == RULES["vicsek"]):
                     cx = ti.cos(noise)  # rotate e_new by the noise angle
                     sx = ti.sin(noise)
@@ -133,15 +134,15 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
                     new += noise
             if ti.static(rule == RULES["leader"]):
                 if ids[i] == 0:
-                    new = prm[_THETA0]
+                    new = prm[P.THETA0]
             if ti.static(rule != RULES["vicsek"]):
                 e_new = ti.math.vec2(ti.cos(new), ti.sin(new))
             e = ti.math.vec2(ew[i, 0], ew[i, 1])  # e(theta_i(t))
             if ti.static(move_new):
                 e = e_new
-            x = xi + prm[_V0DT] * e
+            x = xi + prm[P.V0DT] * e
             if ti.static(periodic):
-                L = prm[_L]
+                L = prm[P.L]
                 x -= L * ti.floor(x / L)
                 for c in ti.static(range(2)):
                     if x[c] >= L:  # x - L floor(x / L) can round up to L itself
@@ -186,12 +187,11 @@ class VicsekKernel(ModelKernel):
         self._no_theta = ti.ndarray(ti.f64, shape=1)  # stands in for theta (vicsek rule)
         self.grid = Grid(n, radius, L if self.periodic else None)
         self.graph = MetricGraph(n, radius, scenario.inclusive, self.periodic)
-        self.prm = ti.ndarray(ti.f64, shape=8)
-        prm = np.zeros(8)
-        prm[[_R2, _V0DT, _ETA, _G, _L, _THETA0]] = [
-            radius * radius, p.v0 * scenario.time.dt, p.eta, p.g or 1.0, L, p.leader_heading,
-        ]
-        self.prm.from_numpy(prm)
+        self.prm = ti.ndarray(ti.f64, shape=P.size)
+        self.prm.from_numpy(P.pack(
+            R2=radius * radius, V0DT=p.v0 * scenario.time.dt, ETA=p.eta, G=p.g or 1.0, L=L,
+            THETA0=p.leader_heading,
+        ))
         self.bad = ti.ndarray(ti.i32, shape=1)
         if p.rule == "vicsek":
             self._arc_lo = ti.ndarray(ti.f64, shape=n)
