@@ -43,7 +43,7 @@ def run(
         return batch.run_batch(make, [scenario], backend=rt.backend, sinks=[sink],
                                on_progress=on_progress, should_stop=should_stop)[0]
     t0 = time.perf_counter()
-    model: ModelKernel = kernel_for(scenario.model.kind)(scenario)
+    model: ModelKernel = kernel_for(scenario.model.kind)(scenario, rt.policy)
     setup_seconds = time.perf_counter() - t0
     rec = scenario.recording
     steps = scenario.time.steps

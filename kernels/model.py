@@ -16,6 +16,8 @@ import numpy as np
 
 from schemas import Scenario
 
+from .runtime import DevicePolicy
+
 
 class ModelKernel(ABC):
     """One model's state and step on the Taichi backend.
@@ -28,8 +30,9 @@ class ModelKernel(ABC):
     # The fused small-N batch (many steps of many replicas per launch), if the model has one.
     batch: ClassVar[Any] = None
 
-    def __init__(self, scenario: Scenario):
+    def __init__(self, scenario: Scenario, policy: DevicePolicy):
         self.scenario = scenario
+        self.policy = policy  # how this device builds the grids (runtime.Runtime.policy)
 
     @abstractmethod
     def step(self, step: int) -> None:

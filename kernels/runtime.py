@@ -31,10 +31,31 @@ _ARCH_NAMES = {"x64": "cpu", "arm64": "cpu"}
 
 
 @dataclass(frozen=True)
+class DevicePolicy:
+    """How the neighbour grids build on a device: decided once from the backend, then
+    handed to every grid, so a test can build a GPU variant on the CPU."""
+
+    serial_scatter: bool
+    """The serial stable scatter (fastest on a CPU), or atomic slots then a per-bucket sort
+    by old index (a GPU); both give the same permutation."""
+    dense_grid: bool
+    """Whether the plane may use the dense row-by-row grid (its scan is serial: a CPU's)."""
+
+    @staticmethod
+    def for_backend(backend: str) -> DevicePolicy:
+        cpu = backend == "cpu"
+        return DevicePolicy(serial_scatter=cpu, dense_grid=cpu)
+
+
+@dataclass(frozen=True)
 class Runtime:
     backend: str  # what actually runs: "cpu", "cuda" or "vulkan"
     threads: int | None
     thread_id: int
+
+    @property
+    def policy(self) -> DevicePolicy:
+        return DevicePolicy.for_backend(self.backend)
 
 
 _current: Runtime | None = None

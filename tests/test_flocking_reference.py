@@ -15,6 +15,7 @@ import pytest
 import kernels
 from kernels.model import all_kernels
 from kernels.models.flocking.fused import FlockingBatch
+from kernels.runtime import DevicePolicy
 from schemas import Scenario
 
 TOL = 1e-10
@@ -261,12 +262,9 @@ def make_kernel(sc: Scenario, hashed: bool = False, path: str = "per_step"):
     path "fused": the fused batch where the engine would take it (`FusedKernel`)."""
     if path == "fused" and kernels.engine.fused_batch(sc, "cpu") is not None:
         return FusedKernel(sc)
-    k = all_kernels()[sc.model.kind](sc)
-    if hashed:
-        for g in (k.grid, k.stage_grid):
-            if g is not None:
-                g.dense = None
-    return k
+    # hashed: the policy of a device without the dense grid (a GPU's), on the CPU.
+    policy = DevicePolicy(serial_scatter=True, dense_grid=not hashed)
+    return all_kernels()[sc.model.kind](sc, policy)
 
 
 def state(k) -> tuple[np.ndarray, np.ndarray]:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
+from kernels.runtime import DevicePolicy
 from kernels.space.grid import Grid, make_visitor, permute_rows, within
 from tests.reference import adjacency
 
@@ -36,11 +37,16 @@ def _lister(inclusive: bool, periodic: bool):
     return lister
 
 
+def policy(serial: bool = True) -> DevicePolicy:
+    """The CPU's grid policy, or (serial=False) a GPU's parallel scatter, built on the CPU."""
+    return DevicePolicy(serial_scatter=serial, dense_grid=True)
+
+
 def grid_adjacency(pos: np.ndarray, r: float, L: float | None, inclusive: bool,
-                   serial: bool | None = None) -> np.ndarray:
+                   serial: bool = True) -> np.ndarray:
     """Adjacency found through the grid, in the original agent order."""
     n = len(pos)
-    grid = Grid(n, r, L, serial)
+    grid = Grid(n, r, L, policy(serial))
     p = ti.ndarray(ti.f64, shape=(n, 2))
     p.from_numpy(pos)
     grid.build(p)
@@ -119,7 +125,7 @@ def test_swarm_spread_over_a_huge_area(taichi_cpu):
     pos = (centres[:, None, :] + rng.normal(0, 0.7, size=(20, 15, 2))).reshape(-1, 2)
     a = assert_same(pos, 1.0, None, False)
     assert a.sum() > 0
-    grid = Grid(len(pos), 1.0, None)
+    grid = Grid(len(pos), 1.0, None, policy())
     assert grid.n_buckets <= 4 * len(pos) + 16  # memory follows N, not the area
 
 
@@ -138,7 +144,7 @@ def test_sparse_box_caps_cells(taichi_cpu):
     pos[1] = pos[0] + [0.6, 0.0]
     a = assert_same(pos, 1.0, 1e4, True)
     assert a[0, 1]
-    assert Grid(50, 1.0, 1e4).n_buckets <= 4 * 50 + 16
+    assert Grid(50, 1.0, 1e4, policy()).n_buckets <= 4 * 50 + 16
 
 
 @pytest.mark.parametrize("L", [None, 12.0])
@@ -155,7 +161,7 @@ def test_build_is_deterministic(taichi_cpu):
     pos = rng.uniform(0, 30, size=(5000, 2))
     perms = []
     for serial in (True, True, False):
-        grid = Grid(len(pos), 1.0, 30.0, serial)
+        grid = Grid(len(pos), 1.0, 30.0, policy(serial))
         p = ti.ndarray(ti.f64, shape=pos.shape)
         p.from_numpy(pos)
         grid.build(p)
@@ -179,7 +185,7 @@ def test_half_stencil_graph_matches_brute_force(taichi_cpu, inclusive, L):
     pos = rng.uniform(0, L or 8.0, size=(150, 2))
     pos[:4] = [[1.0, 1.0], [1.5, 1.0], [1.0, 1.5], [1.0, 1.25]]  # pairs exactly at r
     want = adjacency(pos, r, L, inclusive)
-    grid = Grid(len(pos), r, L)
+    grid = Grid(len(pos), r, L, policy())
     st = SortedState({"pos": pos})
     grid.build(st["pos"])
     st.resort(grid)

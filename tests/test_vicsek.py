@@ -208,7 +208,7 @@ def test_bucketed_circular_spread_equals_the_sorted_one(taichi_cpu, spread):
     from kernels.models.vicsek.kernel import VicsekKernel
     from kernels.space.observables import circular_spread
 
-    k = VicsekKernel(scenario(N=1000))
+    k = VicsekKernel(scenario(N=1000), taichi_cpu.policy)
     gen = np.random.default_rng(int(spread * 10))
     theta = gen.uniform(2.0, 2.0 + spread, size=1000) + 2 * np.pi * gen.integers(-3, 3, 1000)
     arr = ti.ndarray(ti.f64, shape=(1000, 2))

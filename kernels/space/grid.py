@@ -25,8 +25,8 @@ import math
 import numpy as np
 import taichi as ti
 
-from .. import runtime
 from ..result import SimulationDiverged
+from ..runtime import DevicePolicy
 
 nd = ti.types.ndarray()
 WIDEN = 1.0 + 1e-9  # cells a hair wider than the radius (see above)
@@ -178,17 +178,16 @@ class Grid:
     `periodic_L` set: the box [0, L)^2 with wrap-around; None: the unbounded plane.
     After `build(pos)`, `perm[i]` is agent i's slot in bucket order, and `view()` is what a
     visitor needs (bucket starts, cell ids, geometry) as a static tuple for kernels.
-    `serial` picks the scatter: serial stable (default on the CPU) or atomic slots then a
-    per-bucket sort by old index (default on a GPU); both give the same `perm`.
+    `policy.serial_scatter` picks the scatter: serial stable (the CPU's) or atomic slots then
+    a per-bucket sort by old index (a GPU's); both give the same `perm`.
     """
 
     def __init__(self, n: int, radius: float, periodic_L: float | None,
-                 serial: bool | None = None):
+                 policy: DevicePolicy):
         self.n = n
         self.radius = float(radius)
         self.periodic = periodic_L is not None
-        # A serial stable scatter is fastest on a CPU; a GPU gets the parallel variant.
-        self.serial = runtime.current().backend == "cpu" if serial is None else serial
+        self.serial = policy.serial_scatter
         # The box uses cells of r/2 and a 5x5 stencil: its rows are contiguous, and it reads
         # about 30 % fewer candidates than r-cells with a 3x3 stencil. The plane's hashed
         # buckets are not contiguous, so there fewer, larger cells win.
@@ -221,7 +220,7 @@ class Grid:
         # Exact cell ids filter hash collisions on the plane (unused in the box).
         self.cid = ti.ndarray(ti.i64, shape=n if not self.periodic else 1)
         self.cid_sorted = ti.ndarray(ti.i64, shape=n if not self.periodic else 1)
-        self._src = None if serial else ti.ndarray(ti.i32, shape=n)
+        self._src = None if self.serial else ti.ndarray(ti.i32, shape=n)
         self._bb_part = None if self.periodic else bbox_buffer(n)
 
     def build(self, pos: ti.Ndarray, step: int = 0) -> None:

@@ -18,8 +18,8 @@ import math
 import numpy as np
 import taichi as ti
 
-from .. import runtime
 from ..result import SimulationDiverged
+from ..runtime import DevicePolicy
 from .grid import MAX_CELLS_ACROSS, WIDEN, Grid, bbox_buffer, bounding_box
 
 nd = ti.types.ndarray()
@@ -125,12 +125,13 @@ def make_dense_visitor(pair):
 
 
 class PlaneGrid:
-    """The neighbour grid of the plane models: a DenseGrid while the swarm is compact (on
-    the CPU), else the engine's hashed grid. `layout` names the one built last."""
+    """The neighbour grid of the plane models: a DenseGrid while the swarm is compact (where
+    the policy allows one: the CPU), else the engine's hashed grid. `layout` names the one
+    built last."""
 
-    def __init__(self, n: int, radius: float):
-        self.n, self.radius = n, radius
-        self.dense = DenseGrid(n, radius) if runtime.current().backend == "cpu" else None
+    def __init__(self, n: int, radius: float, policy: DevicePolicy):
+        self.n, self.radius, self.policy = n, radius, policy
+        self.dense = DenseGrid(n, radius) if policy.dense_grid else None
         self.hashed: Grid | None = None  # allocated when first needed
         self.layout = "hash"
 
@@ -145,7 +146,7 @@ class PlaneGrid:
         if self.layout == "dense":
             return self.dense
         if self.hashed is None:
-            self.hashed = Grid(self.n, self.radius, None)
+            self.hashed = Grid(self.n, self.radius, None, self.policy)
         return self.hashed
 
     @property

@@ -25,6 +25,7 @@ from schemas import Scenario
 
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
+from ...runtime import DevicePolicy
 from ...space.graph import count_roots, reset_parent
 from ...space.grid import permute, permute_rows
 from ...space.initial import InitialState, initial_state
@@ -72,8 +73,8 @@ class FlockingKernel(ModelKernel):
     kind = "flocking"
     batch = FlockingBatch  # M2 and M3 (inherited) on the fused small-N path
 
-    def __init__(self, scenario: Scenario):
-        super().__init__(scenario)
+    def __init__(self, scenario: Scenario, policy: DevicePolicy):
+        super().__init__(scenario, policy)
         p = scenario.model
         self.p = p
         self.n = n = scenario.n_agents
@@ -114,7 +115,7 @@ class FlockingKernel(ModelKernel):
 
     def _init_navigation(self) -> None:
         """No mission potential: empty obstacle grid and parameters (never read)."""
-        self.obstacles = ObstacleGrid(np.zeros((0, 2)), np.zeros(0), 1.0)
+        self.obstacles = ObstacleGrid(np.zeros((0, 2)), np.zeros(0), 1.0, self.policy)
         self.nav = _f64(NAV.size)
 
     def _before_motion(self, step: int) -> None:
@@ -156,9 +157,9 @@ class FlockingKernel(ModelKernel):
         self.all_pairs = self.p.uses_all_pairs(n)
         self.grid_radius = r = scenario.neighbours.radius
         # All pairs: the grid is never built; its arrays only fill the kernels' signature.
-        self.grid = PlaneGrid(1 if self.all_pairs else n, r)
+        self.grid = PlaneGrid(1 if self.all_pairs else n, r, self.policy)
         rk4_grid = self.p.integrator == "rk4" and not self.all_pairs
-        self.stage_grid = PlaneGrid(n, r) if rk4_grid else None
+        self.stage_grid = PlaneGrid(n, r, self.policy) if rk4_grid else None
         self.per_agent_radius = flags["rule"] != RADIUS_RULES["uniform"]
         self._no_rad = _f64(1)
         self.parent, self.labels = _i32(n), _i32(n)

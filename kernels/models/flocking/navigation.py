@@ -23,6 +23,7 @@ from functools import cache
 import numpy as np
 import taichi as ti
 
+from ...runtime import DevicePolicy
 from ...space.grid import Grid, make_visitor
 from ...space.params import Slots
 
@@ -44,11 +45,12 @@ def nav_parameters(destination, obstacle_range: float, kappa: float, bbox) -> np
 class ObstacleGrid:
     """Static obstacles (centres and radii) in bucket order of their own grid."""
 
-    def __init__(self, centers: np.ndarray, radii: np.ndarray, obstacle_range: float):
+    def __init__(self, centers: np.ndarray, radii: np.ndarray, obstacle_range: float,
+                 policy: DevicePolicy):
         self.m = m = len(centers)
         cell = obstacle_range + (float(radii.max()) if m else 0.0)
         self.cell = cell
-        self.grid = Grid(max(m, 1), cell, None)
+        self.grid = Grid(max(m, 1), cell, None, policy)
         pos = ti.ndarray(ti.f64, shape=(max(m, 1), 2))
         rad = ti.ndarray(ti.f64, shape=max(m, 1))
         if m:

@@ -20,6 +20,7 @@ import numpy as np
 from schemas import Scenario
 
 from ...model import register_kernel
+from ...runtime import DevicePolicy
 from ...space.initial import InitialState
 from . import observe as fo
 from .forces import DAMPING, RADIUS_RULES, P, radius_kernel
@@ -31,8 +32,8 @@ from .navigation import NAV, ObstacleGrid, nav_eval_kernel, nav_parameters
 class ObstacleFlockingKernel(FlockingKernel):
     kind = "flocking_obstacles"
 
-    def __init__(self, scenario: Scenario):
-        super().__init__(scenario)
+    def __init__(self, scenario: Scenario, policy: DevicePolicy):
+        super().__init__(scenario, policy)
         p = self.p
         self.nav_k = nav_eval_kernel(self.flags["has_obstacles"], self.flags["unit_kappa"])
         self.mission = _f64(self.n, 4)  # (V_i, grad V_i, min boundary distance)
@@ -65,7 +66,7 @@ class ObstacleFlockingKernel(FlockingKernel):
         centers = np.array([*p.obstacles, *(d.center for d in p.discs)],
                            dtype=np.float64).reshape(-1, 2)
         radii = np.array([0.0] * len(p.obstacles) + [d.radius for d in p.discs])
-        self.obstacles = ObstacleGrid(centers, radii, p.obstacle_range)
+        self.obstacles = ObstacleGrid(centers, radii, p.obstacle_range, self.policy)
         self.nav = _f64(NAV.size)
         self.nav.from_numpy(nav_parameters(p.destination, p.obstacle_range, p.kappa,
                                            self.obstacles.bbox))

@@ -26,6 +26,7 @@ from schemas.formation import FormationParams, SaturatingF
 
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
+from ...runtime import DevicePolicy
 from ...space.graph import MetricGraph
 from ...space.grid import Grid, make_visitor, permute, permute_rows, within
 from ...space.initial import initial_state
@@ -152,8 +153,8 @@ class FormationKernel(ModelKernel):
     kind = "formation"
     batch = FormationBatch
 
-    def __init__(self, scenario: Scenario):
-        super().__init__(scenario)
+    def __init__(self, scenario: Scenario, policy: DevicePolicy):
+        super().__init__(scenario, policy)
         p: FormationParams = scenario.model  # type: ignore[assignment]
         self.p = p
         self.n = n = scenario.n_agents
@@ -171,7 +172,7 @@ class FormationKernel(ModelKernel):
                 )
         self.schedule = OffsetSchedule(p.formation, p.schedule, n, d) if self.f1 else None
         self.state = SortedState({"pos": init.positions})
-        self.grid = Grid(n, d, None)
+        self.grid = Grid(n, d, None, policy)
         self.graph: MetricGraph | None = None
         self.prm_host = force_params(p, d, dt)
         self.prm = ti.ndarray(ti.f64, shape=self.prm_host.shape)
@@ -183,7 +184,7 @@ class FormationKernel(ModelKernel):
         self.gkind = G_KINDS[p.repulsion.kind]
         self.inclusive = scenario.inclusive
         if p.integrator == "rk4":
-            self.grid2 = Grid(n, d, None)
+            self.grid2 = Grid(n, d, None, policy)
             self.tmp_pos = ti.ndarray(ti.f64, shape=(n, 2))
             self.tmp_vel = ti.ndarray(ti.f64, shape=(n, 2))
             self.tmp_ids = ti.ndarray(ti.i32, shape=n)
@@ -247,7 +248,7 @@ class FormationKernel(ModelKernel):
             return 1
         m = stencil_reach(densest)
         if self.fine is None or self.fine[0] != m:
-            self.fine = (m, Grid(self.n, self.d / m, None))
+            self.fine = (m, Grid(self.n, self.d / m, None, self.policy))
         fine = self.fine[1]
         fine.build(self.state["pos"], step)
         self.state.resort(fine)

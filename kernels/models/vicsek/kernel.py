@@ -23,6 +23,7 @@ from schemas import PeriodicBox, Scenario, VicsekParams
 
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
+from ...runtime import DevicePolicy
 from ...space import rng
 from ...space.graph import MetricGraph, count_roots, find, link, reset_parent
 from ...space.grid import Grid, make_visitor, within
@@ -165,8 +166,8 @@ class VicsekKernel(ModelKernel):
     kind = "vicsek"
     batch = VicsekBatch
 
-    def __init__(self, scenario: Scenario):
-        super().__init__(scenario)
+    def __init__(self, scenario: Scenario, policy: DevicePolicy):
+        super().__init__(scenario, policy)
         p: VicsekParams = scenario.model  # type: ignore[assignment]
         self.p = p
         self.n = n = scenario.n_agents
@@ -185,7 +186,7 @@ class VicsekKernel(ModelKernel):
         self.state = SortedState(arrays)
         self._swap = tuple(arrays)
         self._no_theta = ti.ndarray(ti.f64, shape=1)  # stands in for theta (vicsek rule)
-        self.grid = Grid(n, radius, L if self.periodic else None)
+        self.grid = Grid(n, radius, L if self.periodic else None, policy)
         self.graph = MetricGraph(n, radius, scenario.inclusive, self.periodic)
         self.prm = ti.ndarray(ti.f64, shape=P.size)
         self.prm.from_numpy(P.pack(
