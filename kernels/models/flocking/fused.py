@@ -42,6 +42,7 @@ import taichi as ti
 from schemas import Scenario
 
 from ...batch import FusedBatch
+from ...space.cells import clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
 from ...space.grid import MAX_CELLS_ACROSS, WIDEN
 from . import observe as fo
@@ -101,6 +102,9 @@ def _bucket(cx, cy, nb):
     return ti.cast(h % ti.cast(nb, ti.u32), ti.i32)
 
 
+_cell_sort, _in_id_order = make_cell_sort()
+
+
 @ti.func
 def build_cells(a0, n, c0, cap, w0, src: ti.template(), may_hash: ti.template(),
                 cell: ti.template(), cstart: ti.template(), cidx: ti.template()):
@@ -145,8 +149,7 @@ def build_cells(a0, n, c0, cap, w0, src: ti.template(), may_hash: ti.template(),
         nb = nx * ny
         if hashed:
             nb = cap
-        for c in range(c0, c0 + nb + 1):
-            cstart[c] = 0
+        clear_cells(c0, nb, cstart)
         for i in range(a0, a0 + n):
             cx = ti.cast(ti.floor((src[i, 0] - lo[0]) / w), ti.i32)
             cy = ti.cast(ti.floor((src[i, 1] - lo[1]) / w), ti.i32)
@@ -157,20 +160,9 @@ def build_cells(a0, n, c0, cap, w0, src: ti.template(), may_hash: ti.template(),
                 cc = ti.max(ti.min(cx, nx - 1), 0) + nx * ti.max(ti.min(cy, ny - 1), 0)
             cell[i] = cc
             cstart[c0 + cc + 1] += 1
-        for c in range(c0 + 1, c0 + nb + 1):
-            cstart[c] += cstart[c - 1]
-        for i in range(a0, a0 + n):  # cstart[c] as the fill pointer of cell c
-            slot = c0 + cell[i]
-            k = cstart[slot]
-            cidx[a0 + k] = i
-            cstart[slot] = k + 1
-        for m in range(nb):  # shift back: start[c] = end[c - 1], from the top
-            c = c0 + nb - m
-            cstart[c] = cstart[c - 1]
-        cstart[c0] = 0
+        _cell_sort(a0, n, c0, nb, cell, cstart, cidx, ())
     elif nx == 0:
-        for k in range(n):
-            cidx[a0 + k] = a0 + k
+        _in_id_order(a0, n, cidx, ())
     return Grid(nx, ny, w, lo[0], lo[1], span)
 
 

@@ -31,6 +31,7 @@ from schemas import PeriodicBox, Scenario, VicsekParams
 
 from ...batch import FusedBatch
 from ...space import rng
+from ...space.cells import clear_cells, make_cell_sort
 from ...space.graph import union_serial
 from ...space.grid import MAX_CELLS_ACROSS, WIDEN
 
@@ -86,6 +87,13 @@ def advance_kernel(rule: int, periodic: bool):
         parent[i] = i
 
     @ti.func
+    def place(k, i, S: ti.template()):
+        pos, ew, theta, ps, parent = ti.static(S[0], S[1], S[2], S[3], S[4])
+        load(k, i, pos, ew, theta, ps, parent)
+
+    cell_sort, in_id_order = make_cell_sort(place)
+
+    @ti.func
     def build_cells(a0, n, c0, cap, Lb, r, pos: ti.template(), ew: ti.template(),
                     theta: ti.template(), ps: ti.template(), cell: ti.template(),
                     cstart: ti.template(), cidx: ti.template(), parent: ti.template()):
@@ -127,9 +135,9 @@ def advance_kernel(rule: int, periodic: bool):
                 oy = lo[1]
                 if nx < 3 and ny < 3:
                     nx = 0
+        S = ti.static((pos, ew, theta, ps, parent))
         if nx > 0:
-            for c in range(c0, c0 + nx * ny + 1):
-                cstart[c] = 0
+            clear_cells(c0, nx * ny, cstart)
             inv = 1.0 / w
             for i in range(a0, a0 + n):
                 cx = ti.min(ti.cast(ti.floor((pos[i, 0] - ox) * inv), ti.i32), nx - 1)
@@ -137,22 +145,9 @@ def advance_kernel(rule: int, periodic: bool):
                 cc = ti.max(cx, 0) + nx * ti.max(cy, 0)
                 cell[i] = cc
                 cstart[c0 + cc + 1] += 1
-            for c in range(c0 + 1, c0 + nx * ny + 1):
-                cstart[c] += cstart[c - 1]
-            for i in range(a0, a0 + n):  # cstart[c] as the fill pointer of cell c
-                slot = c0 + cell[i]
-                k = cstart[slot]
-                cidx[a0 + k] = i
-                load(a0 + k, i, pos, ew, theta, ps, parent)
-                cstart[slot] = k + 1
-            for m in range(nx * ny):  # shift back: start[c] = end[c - 1], from the top
-                c = c0 + nx * ny - m
-                cstart[c] = cstart[c - 1]
-            cstart[c0] = 0
+            cell_sort(a0, n, c0, nx * ny, cell, cstart, cidx, S)
         elif nx == 0:
-            for k in range(a0, a0 + n):
-                cidx[k] = k
-                load(k, k, pos, ew, theta, ps, parent)
+            in_id_order(a0, n, cidx, S)
         return ti.math.ivec2(nx, ny)
 
     @ti.func
