@@ -11,6 +11,10 @@ box, bounding box, hashed buckets) is its own; the sort is this one.
 
 import taichi as ti
 
+# The CPU backend cuts a parallel loop into tasks of 512 iterations: a fused kernel loops
+# over replicas * SPREAD and works where t % SPREAD == 0, one replica per task.
+SPREAD = 512
+
 
 @ti.func
 def clear_cells(c0, nb, cstart: ti.template()):

@@ -42,7 +42,7 @@ import taichi as ti
 from schemas import Scenario
 
 from ...batch import FusedBatch
-from ...space.cells import clear_cells, make_cell_sort
+from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
 from ...space.grid import MAX_CELLS_ACROSS, WIDEN
 from . import observe as fo
@@ -50,7 +50,6 @@ from . import potentials
 from .topology import build_edges, to_csr
 
 nd = ti.types.ndarray()
-SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
 FAR = 1e300  # "no obstacle within reach", as kernels/models/flocking/navigation.py
 NEAREST_NONE = 1e300
 TWO_PI = 2 * np.pi

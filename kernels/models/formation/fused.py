@@ -36,6 +36,7 @@ from schemas import Scenario
 from schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
 
 from ...batch import FusedBatch
+from ...space.cells import SPREAD
 from ...space.grid import WIDEN
 from ...space.initial import initial_state
 from .forces import F_KINDS, G_KINDS
@@ -61,7 +62,6 @@ from .schedule import OffsetSchedule
 nd = ti.types.ndarray()
 MAX_N = 512  # all pairs up to here: at N = 1000 a fused F2 step cost as much CPU as a
 # per-step one (4.3 vs 4.2 ms, the per-step path on 2 threads), at N = 500 1.3 vs 2.2 ms
-SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
 # Why a replica stopped (iprm[CAUSE]), as the per-step path words it: its step check
 # (0, 1), or its grid's check of the positions it buckets (2, 3; kernels/space/grid.py), which
 # runs first at every step and RK4 stage. Cause 3 is formatted with prm[EXTENT].

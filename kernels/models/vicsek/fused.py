@@ -31,14 +31,13 @@ from schemas import PeriodicBox, Scenario, VicsekParams
 
 from ...batch import FusedBatch
 from ...space import rng
-from ...space.cells import clear_cells, make_cell_sort
+from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import union_serial
 from ...space.grid import MAX_CELLS_ACROSS, WIDEN
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
 ALL_PAIRS_N = 48  # at or below this N every pair is tested (fewer operations than cells)
-SPREAD = 512  # the CPU backend cuts a parallel loop into tasks of 512 iterations
 TWO_PI = 2 * np.pi
 
 # Per-replica parameter slots: prm (f64) and iprm (i32).
