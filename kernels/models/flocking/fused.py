@@ -45,6 +45,7 @@ from ...batch import FusedBatch
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
 from ...space.grid import MAX_CELLS_ACROSS, WIDEN
+from ...space.params import Slots
 from . import observe as fo
 from . import potentials
 from .topology import build_edges, to_csr
@@ -58,12 +59,11 @@ SNAP_DOUBLES = 4_000_000  # snapshot buffer for lambda_2 (32 MB), cut into launc
 MODES = {"fixed": 0, "switching": 1, "mission": 2}
 
 # Per-replica parameter slots: prm (f64) and iprm (i32).
-(DT, A, C, R, R2, CD, VMIN, STUCK2, FLOOR, DX, DY, RANGE, LAMBDA, KAPPA, OBX0, OBY0, OBX1,
- OBY1, OX, OY, OW, OCAP, QC, SPAN) = range(24)
-N_PRM = 24
-(STEPS, EVERY, NOBS, BAD, CAUSE, CELLS, INCL, REVERY, ADAPT, DAMP, ONX, ONY, OCOFF, OM,
- VPER, VOFF, HALVED, GROWN, SNAP, SNAP0) = range(20)
-N_IPRM = 20
+P = Slots("DT", "A", "C", "R", "R2", "CD", "VMIN", "STUCK2", "FLOOR", "DX", "DY", "RANGE",
+         "LAMBDA", "KAPPA", "OBX0", "OBY0", "OBX1", "OBY1", "OX", "OY", "OW", "OCAP", "QC",
+         "SPAN")
+IP = Slots("STEPS", "EVERY", "NOBS", "BAD", "CAUSE", "CELLS", "INCL", "REVERY", "ADAPT", "DAMP",
+          "ONX", "ONY", "OCOFF", "OM", "VPER", "VOFF", "HALVED", "GROWN", "SNAP", "SNAP0")
 DAMPING = {"above_vmin": 1, "below_vmin": 2, "everywhere": 3}  # 0: none (M2)
 # Observable columns (energy: W or Q_reduced; q_constant: Q - Q_reduced).
 OBS = ("step", "mean_velocity_x", "mean_velocity_y", "velocity_disagreement",
@@ -215,20 +215,20 @@ def navigation(b, x, prm: ti.template(), iprm: ti.template(), opos: ti.template(
     navigation function (see kernels/models/flocking/navigation.py), the obstacles folded by the
     product rule over the 3x3 cells of the replica's obstacle grid."""
     acc = ti.math.vec4(1.0, 0.0, 0.0, FAR)
-    if iprm[b, OM] > 0:
-        inside = (prm[b, OBX0] <= x[0]) & (x[0] <= prm[b, OBX1]) & (prm[b, OBY0] <= x[1]) \
-            & (x[1] <= prm[b, OBY1])
+    if iprm[b, IP.OM] > 0:
+        inside = (prm[b, P.OBX0] <= x[0]) & (x[0] <= prm[b, P.OBX1]) & (prm[b, P.OBY0] <= x[1]) \
+            & (x[1] <= prm[b, P.OBY1])
         if inside:
-            w = prm[b, OW]
-            nx = iprm[b, ONX]
-            ny = iprm[b, ONY]
-            c0 = iprm[b, OCOFF]
-            cx = ti.cast(ti.floor((x[0] - prm[b, OX]) / w), ti.i32)
-            cy = ti.cast(ti.floor((x[1] - prm[b, OY]) / w), ti.i32)
+            w = prm[b, P.OW]
+            nx = iprm[b, IP.ONX]
+            ny = iprm[b, IP.ONY]
+            c0 = iprm[b, IP.OCOFF]
+            cx = ti.cast(ti.floor((x[0] - prm[b, P.OX]) / w), ti.i32)
+            cy = ti.cast(ti.floor((x[1] - prm[b, P.OY]) / w), ti.i32)
             xlo = ti.max(cx - 1, 0)
             xhi = ti.min(cx + 1, nx - 1)
-            rng = prm[b, RANGE]
-            lam = prm[b, LAMBDA]
+            rng = prm[b, P.RANGE]
+            lam = prm[b, P.LAMBDA]
             for dy in range(-1, 2):
                 row = cy + dy
                 if row >= 0 and row < ny and xlo <= xhi:
@@ -250,11 +250,11 @@ def navigation(b, x, prm: ti.template(), iprm: ti.template(), opos: ti.template(
                             acc[0] = bb * beta
     bsum = acc[0]
     gb = ti.math.vec2(acc[1], acc[2])
-    y = ti.math.vec2(x[0] - prm[b, DX], x[1] - prm[b, DY])
+    y = ti.math.vec2(x[0] - prm[b, P.DX], x[1] - prm[b, P.DY])
     a = y.dot(y)
     v = 0.0
     g = ti.math.vec2(0.0)
-    kappa = prm[b, KAPPA]
+    kappa = prm[b, P.KAPPA]
     if kappa == 1.0:
         dd = a + bsum
         v = a / dd
@@ -478,7 +478,7 @@ def advance_kernel(mode: int):
             for e in range(ptr[i], ptr[i + 1]):
                 j = idx[e]
                 d = ti.math.vec2(ps[j, 0] - ps[i, 0], ps[j, 1] - ps[i, 1])
-                pot += potentials.value(d.dot(d), prm[b, A], prm[b, C])
+                pot += potentials.value(d.dot(d), prm[b, P.A], prm[b, P.C])
         obs[row, COL["energy"]] = 0.5 * pot + kin
         best = closest_cells(a0, n, c0, cap, ps, cell, cstart, cidx)
         write_closest(row, a0, best, False, cidx, obs)
@@ -496,8 +496,8 @@ def advance_kernel(mode: int):
         kin = velocity_stats(row, a0, n, ps, lo, hi, obs)
         for k in range(a0, a0 + n):
             parent[k] = k
-        vper = iprm[b, VPER]
-        vbase = iprm[b, VOFF] + nrow * ti.select(vper != 0, n, HIST)
+        vper = iprm[b, IP.VPER]
+        vbase = iprm[b, IP.VOFF] + nrow * ti.select(vper != 0, n, HIST)
         dsum = 0.0
         dmin = 2.0**30
         dmax = 0.0
@@ -536,7 +536,7 @@ def advance_kernel(mode: int):
             msum = 0.0
             inside = 0
             mmax = -ti.math.inf
-            omin = prm[b, OCAP]  # exact below the obstacle grid's cell; capped there
+            omin = prm[b, P.OCAP]  # exact below the obstacle grid's cell; capped there
             dmean = 0.0
             dfar = 0.0
             rmin = ti.math.inf
@@ -547,11 +547,11 @@ def advance_kernel(mode: int):
                 x = ti.math.vec2(ps[k, 0], ps[k, 1])
                 nv = ti.math.vec4(mis[k, 0], mis[k, 1], mis[k, 2], mis[k, 3])
                 msum += nv[0]
-                if nv[0] <= prm[b, VMIN]:
+                if nv[0] <= prm[b, P.VMIN]:
                     inside += 1
                 mmax = ti.max(mmax, nv[0])
                 omin = ti.min(omin, nv[3])
-                dd = ti.sqrt((x[0] - prm[b, DX]) ** 2 + (x[1] - prm[b, DY]) ** 2)
+                dd = ti.sqrt((x[0] - prm[b, P.DX]) ** 2 + (x[1] - prm[b, P.DY]) ** 2)
                 dmean += dd
                 dfar = ti.max(dfar, dd)
                 r = ps[k, 4]
@@ -590,10 +590,10 @@ def advance_kernel(mode: int):
             obs[row, COL["velocity_disagreement_components"]] = dev
             obs[row, COL["velocity_disagreement_components_max"]] = ti.sqrt(dev_max)
         else:
-            obs[row, COL["q_constant"]] = prm[b, QC]
+            obs[row, COL["q_constant"]] = prm[b, P.QC]
         obs[row, COL["energy"]] = energy
-        if iprm[b, SNAP] != 0:
-            base = sbase[b] + (nrow - iprm[b, SNAP0]) * n * 3
+        if iprm[b, IP.SNAP] != 0:
+            base = sbase[b] + (nrow - iprm[b, IP.SNAP0]) * n * 3
             for k in range(a0, a0 + n):
                 at = base + (cidx[k] - a0) * 3
                 snap[at] = ps[k, 0]
@@ -613,14 +613,14 @@ def advance_kernel(mode: int):
                 n = aoff[b + 1] - a0
                 c0 = coff[b]
                 cap = coff[b + 1] - c0 - 1
-                every = iprm[b, EVERY]
-                dt = prm[b, DT]
+                every = iprm[b, IP.EVERY]
+                dt = prm[b, P.DT]
                 # (uniform R^2, inclusive, a, c) of the pair terms
-                q = ti.math.vec4(prm[b, R2], iprm[b, INCL], prm[b, A], prm[b, C])
-                iprm[b, SNAP0] = iprm[b, NOBS]
+                q = ti.math.vec4(prm[b, P.R2], iprm[b, IP.INCL], prm[b, P.A], prm[b, P.C])
+                iprm[b, IP.SNAP0] = iprm[b, IP.NOBS]
                 s = s0
-                while s < s1 and s <= iprm[b, STEPS] and iprm[b, BAD] < 0:
-                    steps = iprm[b, STEPS]
+                while s < s1 and s <= iprm[b, IP.STEPS] and iprm[b, IP.BAD] < 0:
+                    steps = iprm[b, IP.STEPS]
                     graph = s % every == 0 or s == steps  # an observation step
                     nx = 0
                     ny = 0
@@ -628,13 +628,13 @@ def advance_kernel(mode: int):
                     ox = 0.0
                     oy = 0.0
                     if ti.static(not fixed):
-                        if iprm[b, CELLS]:
-                            g = build_cells(a0, n, c0, cap, prm[b, R] * WIDEN, pos, True,
+                        if iprm[b, IP.CELLS]:
+                            g = build_cells(a0, n, c0, cap, prm[b, P.R] * WIDEN, pos, True,
                                             cell, cstart, cidx)
                             if g[0] < 0:
-                                iprm[b, BAD] = s
-                                iprm[b, CAUSE] = 1
-                                prm[b, SPAN] = g[5]
+                                iprm[b, IP.BAD] = s
+                                iprm[b, IP.CAUSE] = 1
+                                prm[b, P.SPAN] = g[5]
                                 break
                             nx = ti.cast(g[0], ti.i32)
                             ny = ti.cast(g[1], ti.i32)
@@ -665,30 +665,30 @@ def advance_kernel(mode: int):
                             for c in ti.static(range(4)):
                                 mis[k, c] = nv[c]
                     if graph:
-                        row = ooff[b] + iprm[b, NOBS]
+                        row = ooff[b] + iprm[b, IP.NOBS]
                         obs[row, 0] = s
                         if ti.static(fixed):
                             observe_fixed(b, a0, n, c0, cap, row, prm, ps, ptr, idx, cell,
                                           cstart, cidx, arc_lo, arc_hi, obs)
                         else:
-                            observe_metric(b, a0, n, c0, nx, ny, w, row, iprm[b, NOBS], q, prm,
+                            observe_metric(b, a0, n, c0, nx, ny, w, row, iprm[b, IP.NOBS], q, prm,
                                            iprm, ps, cell, cstart, cidx, parent, csum,
                                            arc_lo, arc_hi, mis, obs, val,
                                            snap, sbase)
-                        iprm[b, NOBS] += 1
+                        iprm[b, IP.NOBS] += 1
                     if s < steps:
                         if ti.static(mission):
                             # Eq. 4 at its cadence, before the step's motion, synchronously
                             # (reads the slot copy, writes rad in id order).
-                            if iprm[b, ADAPT] and s > 0 and s % iprm[b, REVERY] == 0:
+                            if iprm[b, IP.ADAPT] and s > 0 and s % iprm[b, IP.REVERY] == 0:
                                 halved = 0
                                 grown = 0
                                 for k in range(a0, a0 + n):
                                     r = ps[k, 4]
                                     v2 = ps[k, 2] * ps[k, 2] + ps[k, 3] * ps[k, 3]
                                     new = r
-                                    if v2 < prm[b, STUCK2] and mis[k, 0] > prm[b, VMIN]:
-                                        new = ti.max(0.5 * r, prm[b, FLOOR])
+                                    if v2 < prm[b, P.STUCK2] and mis[k, 0] > prm[b, P.VMIN]:
+                                        new = ti.max(0.5 * r, prm[b, P.FLOOR])
                                         if new < r:
                                             halved += 1
                                     else:
@@ -700,8 +700,8 @@ def advance_kernel(mode: int):
                                     rad[cidx[k]] = new
                                 for k in range(a0, a0 + n):
                                     ps[k, 4] = rad[cidx[k]]
-                                iprm[b, HALVED] += halved
-                                iprm[b, GROWN] += grown
+                                iprm[b, IP.HALVED] += halved
+                                iprm[b, IP.GROWN] += grown
                         bad = 0
                         for k in range(a0, a0 + n):
                             # X(s + 1) is written in id order as we go: the visits read
@@ -725,11 +725,11 @@ def advance_kernel(mode: int):
                                 u = ti.math.vec2(acc[0], acc[1]) - acc[2] * vi
                             if ti.static(mission):
                                 u -= ti.math.vec2(mis[k, 1], mis[k, 2])
-                                damp = iprm[b, DAMP]
+                                damp = iprm[b, IP.DAMP]
                                 vm = mis[k, 0]
-                                if damp == 3 or (damp == 1 and vm > prm[b, VMIN]) or (
-                                        damp == 2 and vm <= prm[b, VMIN]):
-                                    u -= prm[b, CD] * vi
+                                if damp == 3 or (damp == 1 and vm > prm[b, P.VMIN]) or (
+                                        damp == 2 and vm <= prm[b, P.VMIN]):
+                                    u -= prm[b, P.CD] * vi
                             v = vi + dt * u
                             x = xi + dt * v
                             pos[i, 0] = x[0]
@@ -738,7 +738,7 @@ def advance_kernel(mode: int):
                             vel[i, 1] = v[1]
                             bad |= _nonfinite(x, v)
                         if bad != 0:
-                            iprm[b, BAD] = s
+                            iprm[b, IP.BAD] = s
                     s += 1
 
     return advance
@@ -826,8 +826,8 @@ class FlockingBatch(FusedBatch):
         rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
         self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
         total = int(self.aoff[-1])
-        prm = np.zeros((B, N_PRM))
-        iprm = np.zeros((B, N_IPRM), dtype=np.int32)
+        prm = np.zeros((B, P.size))
+        iprm = np.zeros((B, IP.size), dtype=np.int32)
         pos, vel = np.zeros((total, 2)), np.zeros((total, 2))
         rad = np.zeros(total)
         ptr, idx = [np.zeros(1, dtype=np.int64)], []
@@ -845,11 +845,11 @@ class FlockingBatch(FusedBatch):
             a, c = p.potential.coefficients()
             radius = sc.neighbours.radius if not fixed else 0.0
             rad[a0:a0 + n] = radius
-            prm[b, [DT, A, C, R, R2]] = [sc.time.dt, a, c, radius, radius * radius]
+            prm[b, [P.DT, P.A, P.C, P.R, P.R2]] = [sc.time.dt, a, c, radius, radius * radius]
             vper = n <= p.valency_per_agent_max
             self.vper.append(vper)
             self.vwidth.append(n if vper else HIST)
-            iprm[b, [STEPS, EVERY, BAD, CELLS, INCL, VPER, VOFF]] = [
+            iprm[b, [IP.STEPS, IP.EVERY, IP.BAD, IP.CELLS, IP.INCL, IP.VPER, IP.VOFF]] = [
                 sc.time.steps, sc.recording.observables_every, -1,
                 int(not fixed and not p.uses_all_pairs(n)),
                 int(sc.inclusive) if not fixed else 0, int(vper), voff]
@@ -857,7 +857,7 @@ class FlockingBatch(FusedBatch):
                 voff += rows[b] * self.vwidth[b]
             snap = not fixed and n <= p.lambda2_max_agents
             self.snap.append(snap)
-            iprm[b, SNAP] = int(snap)
+            iprm[b, IP.SNAP] = int(snap)
             if fixed:
                 u, v = build_edges(p.graph, n, sc.seed)
                 indptr, indices = to_csr(n, u, v)
@@ -874,18 +874,18 @@ class FlockingBatch(FusedBatch):
                                                           p.valency_per_agent_max)})
             elif not mission:
                 # 1/2 sum_i sum_{j != i} V(R), the constant part of Q (eq. 10)
-                prm[b, QC] = 0.5 * n * (n - 1) * p.potential.value(radius)
+                prm[b, P.QC] = 0.5 * n * (n - 1) * p.potential.value(radius)
             if mission:
                 cen, orr, start, geo = _obstacle_grid(p)
-                prm[b, [CD, VMIN, STUCK2, FLOOR]] = [p.c_d, p.V_min, p.stuck_speed**2,
-                                                     p.radius_floor]
+                prm[b, [P.CD, P.VMIN, P.STUCK2, P.FLOOR]] = [
+                    p.c_d, p.V_min, p.stuck_speed**2, p.radius_floor]
                 lam_nav = (p.obstacle_range**2 + 1.0) / p.obstacle_range**2
-                prm[b, [DX, DY, RANGE, LAMBDA, KAPPA]] = [*p.destination, p.obstacle_range,
-                                                          lam_nav, p.kappa]
-                prm[b, [OBX0, OBY0, OBX1, OBY1, OX, OY, OW, OCAP]] = [
+                prm[b, [P.DX, P.DY, P.RANGE, P.LAMBDA, P.KAPPA]] = [
+                    *p.destination, p.obstacle_range, lam_nav, p.kappa]
+                prm[b, [P.OBX0, P.OBY0, P.OBX1, P.OBY1, P.OX, P.OY, P.OW, P.OCAP]] = [
                     geo["x0"], geo["y0"], geo["x1"], geo["y1"], geo["ox"], geo["oy"],
                     geo["w"], geo["cap"]]
-                iprm[b, [REVERY, ADAPT, DAMP, ONX, ONY, OCOFF, OM]] = [
+                iprm[b, [IP.REVERY, IP.ADAPT, IP.DAMP, IP.ONX, IP.ONY, IP.OCOFF, IP.OM]] = [
                     p.radius_every, int(p.adaptive_radius), DAMPING[p.damping_region],
                     geo["nx"], geo["ny"], n_ocell, len(cen)]
                 opos.append(cen)
@@ -953,7 +953,7 @@ class FlockingBatch(FusedBatch):
         snap = self.args["snap"].to_numpy()
         obs = None
         for b, on in enumerate(self.snap):
-            r0, r1 = int(iprm[b, SNAP0]), int(iprm[b, NOBS])
+            r0, r1 = int(iprm[b, IP.SNAP0]), int(iprm[b, IP.NOBS])
             if not on or r1 == r0:
                 continue
             if obs is None:
@@ -969,7 +969,7 @@ class FlockingBatch(FusedBatch):
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         """The per-step path's series, in its order (kernel.py, obstacles.py)."""
-        nobs = int(iprm[b, NOBS])
+        nobs = int(iprm[b, IP.NOBS])
         o0 = self.ooff[b]
         rows = self.host("obs")[o0:o0 + nobs]
         col = {k: rows[:, COL[k]] for k in OBS}
@@ -986,7 +986,7 @@ class FlockingBatch(FusedBatch):
         out["components"] = col["components"]
         out.update({k: col[k] for k in ("valency_mean", "valency_min", "valency_max")})
         n, w = self.scenarios[b].n_agents, self.vwidth[b]
-        v0 = int(iprm[b, VOFF])
+        v0 = int(iprm[b, IP.VOFF])
         val = self.host("val")[v0:v0 + nobs * w].reshape(nobs, w)
         val = val.astype(np.float64)
         if self.vper[b]:
@@ -1032,20 +1032,20 @@ class FlockingBatch(FusedBatch):
         if self.mode == "fixed":
             out["graph"] = self.graph_info[b]
         if self.mode == "mission":
-            out["adaptive_radius"] = {"halvings": int(iprm[b, HALVED]),
-                                      "increases": int(iprm[b, GROWN])}
+            out["adaptive_radius"] = {"halvings": int(iprm[b, IP.HALVED]),
+                                      "increases": int(iprm[b, IP.GROWN])}
         return out
 
     def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
         """(step, quantity, cause) in the per-step path's words, or None."""
         from .kernel import DIVERGED_CAUSE
 
-        step = int(iprm[b, BAD])
+        step = int(iprm[b, IP.BAD])
         if step < 0:
             return None
-        if iprm[b, CAUSE] == 0:
+        if iprm[b, IP.CAUSE] == 0:
             return step, "position/velocity", DIVERGED_CAUSE
-        span = float(self.args["prm"].to_numpy()[b, SPAN])
+        span = float(self.args["prm"].to_numpy()[b, P.SPAN])
         if not np.isfinite(span):
             return step, "position", "a position became non-finite"
         return step, "position", (

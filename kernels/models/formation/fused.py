@@ -42,15 +42,8 @@ from ...space.initial import initial_state
 from .forces import F_KINDS, G_KINDS
 from .fused_observe import COMMON, F1_OBS, F2_OBS, N_OBS, OBS, observe
 from .fused_terms import (
-    BAD,
-    CAUSE,
-    DT,
-    EVERY,
-    EXTENT,
-    N_IPRM,
-    N_PRM,
-    NOBS,
-    STEPS,
+    IP,
+    P,
     is_nonfinite,
     leader_state,
     rate,
@@ -62,9 +55,9 @@ from .schedule import OffsetSchedule
 nd = ti.types.ndarray()
 MAX_N = 512  # all pairs up to here: at N = 1000 a fused F2 step cost as much CPU as a
 # per-step one (4.3 vs 4.2 ms, the per-step path on 2 threads), at N = 500 1.3 vs 2.2 ms
-# Why a replica stopped (iprm[CAUSE]), as the per-step path words it: its step check
+# Why a replica stopped (iprm[IP.CAUSE]), as the per-step path words it: its step check
 # (0, 1), or its grid's check of the positions it buckets (2, 3; kernels/space/grid.py), which
-# runs first at every step and RK4 stage. Cause 3 is formatted with prm[EXTENT].
+# runs first at every step and RK4 stage. Cause 3 is formatted with prm[P.EXTENT].
 CAUSES = (
     "two agents at the same position, where g is singular (dt too large lets agents jump "
     "onto each other)",
@@ -88,19 +81,19 @@ def advance_kernel(rk4: bool):
                 b = t // SPREAD
                 a0 = aoff[b]
                 n = aoff[b + 1] - a0
-                steps = iprm[b, STEPS]
-                every = iprm[b, EVERY]
-                dt = prm[b, DT]
+                steps = iprm[b, IP.STEPS]
+                every = iprm[b, IP.EVERY]
+                dt = prm[b, P.DT]
                 per = ti.static(2 if rk4 else 1)
                 s = s0
-                while s < s1 and s <= steps and iprm[b, BAD] < 0:
+                while s < s1 and s <= steps and iprm[b, IP.BAD] < 0:
                     h = s * per
                     if runaway(b, a0, n, pos, prm, iprm) != 0:
-                        iprm[b, BAD] = s
+                        iprm[b, IP.BAD] = s
                         break
                     if s % every == 0 or s == steps:
-                        row = ooff[b] + iprm[b, NOBS]
-                        iprm[b, NOBS] += 1
+                        row = ooff[b] + iprm[b, IP.NOBS]
+                        iprm[b, IP.NOBS] += 1
                         observe(b, a0, n, s, h, h0, row, prm, iprm, chg, inforce, lead,
                                  forms, pos, deg, parent, ang, gmax, gcnt, obs)
                     if s < steps:
@@ -155,7 +148,7 @@ def advance_kernel(rk4: bool):
                                         coincident |= ti.cast(r[2] > 0.0, ti.i32)
                                         nonfinite |= ti.cast(is_nonfinite(r[0], r[1]), ti.i32)
                             if stop != 0:
-                                iprm[b, BAD] = s
+                                iprm[b, IP.BAD] = s
                                 break
                             for i in range(a0, a0 + n):
                                 for c in ti.static(range(2)):
@@ -165,8 +158,8 @@ def advance_kernel(rk4: bool):
                                 nonfinite |= ti.cast(is_nonfinite(pos[i, 0], pos[i, 1]),
                                                      ti.i32)
                         if coincident != 0 or nonfinite != 0:
-                            iprm[b, BAD] = s
-                            iprm[b, CAUSE] = ti.select(coincident != 0, 0, 1)
+                            iprm[b, IP.BAD] = s
+                            iprm[b, IP.CAUSE] = ti.select(coincident != 0, 0, 1)
                     s += 1
 
     @ti.kernel
@@ -200,8 +193,8 @@ class FormationBatch(FusedBatch):
         rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
         self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
         B, total = len(scenarios), int(self.aoff[-1])
-        prm = np.zeros((B, N_PRM))
-        iprm = np.zeros((B, N_IPRM), dtype=np.int32)
+        prm = np.zeros((B, P.size))
+        iprm = np.zeros((B, IP.size), dtype=np.int32)
         pos = np.zeros((total, 2))
         chg, inforce, forms = [], [], []
         self.paths, self.f1 = [], []
@@ -243,7 +236,7 @@ class FormationBatch(FusedBatch):
                                 float(c.relaxation == "linear")])
                 inforce.extend([k, *m.ravel()] for k, m in sched.in_force)
                 forms.extend(row for k in sched.stored for row in k)
-        self.steps = iprm[:, STEPS].copy()
+        self.steps = iprm[:, IP.STEPS].copy()
 
         def arr(a, shape, dtype=ti.f64) -> ti.Ndarray:
             a = np.asarray(a, dtype=np.float64 if dtype == ti.f64 else np.int32)
@@ -314,11 +307,11 @@ class FormationBatch(FusedBatch):
 
     def end_at(self, step: int) -> None:
         super().end_at(step)
-        self.steps = np.minimum(self.steps, step)  # the host's copy of iprm[:, STEPS]
+        self.steps = np.minimum(self.steps, step)  # the host's copy of iprm[:, IP.STEPS]
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         o0 = self.ooff[b]
-        rows = self.host("obs")[o0:o0 + iprm[b, NOBS]]
+        rows = self.host("obs")[o0:o0 + iprm[b, IP.NOBS]]
         keep = COMMON + (F1_OBS if self.f1[b] else F2_OBS)
         return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
 
@@ -352,12 +345,12 @@ class FormationBatch(FusedBatch):
                 "dense_regime": {"steps": 0, "max_reach": 1}}
 
     def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
-        step = int(iprm[b, BAD])
+        step = int(iprm[b, IP.BAD])
         if step < 0:
             return None
-        cause = CAUSES[iprm[b, CAUSE]]
-        if iprm[b, CAUSE] == 3:
-            cause = cause.format(float(self.args["prm"].to_numpy()[b, EXTENT]))
+        cause = CAUSES[iprm[b, IP.CAUSE]]
+        if iprm[b, IP.CAUSE] == 3:
+            cause = cause.format(float(self.args["prm"].to_numpy()[b, P.EXTENT]))
         return step, "position", cause
 
     @staticmethod

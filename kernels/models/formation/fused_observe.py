@@ -6,18 +6,8 @@ import taichi as ti
 
 from ...space.graph import find_serial, union_serial
 from .fused_terms import (
-    COLLIDE,
-    D2,
-    F1,
-    FA,
-    FB,
-    FKIND,
-    GKIND,
-    KG,
-    LAG_SIGN,
-    R2,
-    TOL,
-    D,
+    IP,
+    P,
     attract,
     attraction_energy,
     g_over_s,
@@ -50,21 +40,21 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
              gcnt: ti.template(), obs: ti.template()):
     """The observables of X(s) (time index h) into obs[row]: the columns of OBS."""
     p, q, ma, mb, ka, kb = leader_state(b, h, h0, prm, iprm, chg, inforce, lead)
-    fk = iprm[b, FKIND]
-    fa = prm[b, FA]
-    fb = prm[b, FB]
-    gk = iprm[b, GKIND]
-    kg = prm[b, KG]
-    d = prm[b, D]
-    d2 = prm[b, D2]
-    r2 = prm[b, R2]
-    f1 = iprm[b, F1] != 0
+    fk = iprm[b, IP.FKIND]
+    fa = prm[b, P.FA]
+    fb = prm[b, P.FB]
+    gk = iprm[b, IP.GKIND]
+    kg = prm[b, P.KG]
+    d = prm[b, P.D]
+    d2 = prm[b, P.D2]
+    r2 = prm[b, P.R2]
+    f1 = iprm[b, IP.F1] != 0
     qn = ti.sqrt(q.dot(q))
     lag = lag_length(qn, fk, fa, fb)
     a = ti.math.vec2(0.0)
     if qn > 0.0:
-        a = (lag / qn) * q * prm[b, LAG_SIGN]
-    tol = prm[b, TOL]
+        a = (lag / qn) * q * prm[b, P.LAG_SIGN]
+    tol = prm[b, P.TOL]
     for i in range(a0, a0 + n):
         parent[i] = i
     cx = 0.0
@@ -150,7 +140,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
         obs[row, 17] = fsum + 0.5 * gsum
     else:
         obs[row, 18] = fsum + 0.5 * gsum
-        obs[row, 19] = ti.cast(ti.sqrt(near) >= prm[b, COLLIDE], ti.f64)  # D1
+        obs[row, 19] = ti.cast(ti.sqrt(near) >= prm[b, P.COLLIDE], ti.f64)  # D1
         if lead_d > tol:
             lead_k = -1
         iso = 0

@@ -6,14 +6,14 @@ check."""
 import taichi as ti
 
 from ...space.grid import MAX_CELLS_ACROSS
+from ...space.params import Slots
 from .forces import F_KINDS, G_KINDS
 
 # Per-replica parameter slots: prm (f64) and iprm (i32).
-(R2, D, D2, KG, FA, FB, DT, TSTEP, SX, SY, QX, QY, T_ARR, EX, EY, COLLIDE, TOL,
- LAG_SIGN, CELL, EXTENT) = range(20)
-N_PRM = 20
-(STEPS, EVERY, BAD, CAUSE, NOBS, FKIND, GKIND, F1, SPLINE, C0, NC, I0, F0) = range(13)
-N_IPRM = 13
+P = Slots("R2", "D", "D2", "KG", "FA", "FB", "DT", "TSTEP", "SX", "SY", "QX", "QY", "T_ARR", "EX",
+         "EY", "COLLIDE", "TOL", "LAG_SIGN", "CELL", "EXTENT")
+IP = Slots("STEPS", "EVERY", "BAD", "CAUSE", "NOBS", "FKIND", "GKIND", "F1", "SPLINE", "C0", "NC",
+          "I0", "F0")
 
 
 @ti.func
@@ -87,28 +87,28 @@ def leader_state(b, h, h0, prm: ti.template(), iprm: ti.template(), chg: ti.temp
     """The leader at half-step index h (t = h * TSTEP): (p, q, M_A, M_B, k_A, k_B) with
     b_i = M_A A_i + M_B B_i over the stored formations k_A, k_B (k_B = -1: none), as
     OffsetSchedule.weights and StraightLine / the host's spline table give them."""
-    t = h * prm[b, TSTEP]
+    t = h * prm[b, P.TSTEP]
     p = ti.math.vec2(0.0)
     q = ti.math.vec2(0.0)
-    if iprm[b, SPLINE] != 0:
+    if iprm[b, IP.SPLINE] != 0:
         r = h - h0
         p = ti.math.vec2(lead[b, r, 0], lead[b, r, 1])
         q = ti.math.vec2(lead[b, r, 2], lead[b, r, 3])
-    elif t >= prm[b, T_ARR]:
-        p = ti.math.vec2(prm[b, EX], prm[b, EY])
+    elif t >= prm[b, P.T_ARR]:
+        p = ti.math.vec2(prm[b, P.EX], prm[b, P.EY])
     else:
-        q = ti.math.vec2(prm[b, QX], prm[b, QY])
-        p = ti.math.vec2(prm[b, SX], prm[b, SY]) + q * t
+        q = ti.math.vec2(prm[b, P.QX], prm[b, P.QY])
+        p = ti.math.vec2(prm[b, P.SX], prm[b, P.SY]) + q * t
     ma = ti.math.vec4(0.0)
     mb = ti.math.vec4(0.0)
     ka = 0
     kb = -1
-    if iprm[b, F1] != 0:
-        c0 = iprm[b, C0]
-        i0 = iprm[b, I0]
+    if iprm[b, IP.F1] != 0:
+        c0 = iprm[b, IP.C0]
+        i0 = iprm[b, IP.I0]
         done = 0
         found = 0
-        for j in range(iprm[b, NC]):
+        for j in range(iprm[b, IP.NC]):
             st = chg[c0 + j, 0]
             en = chg[c0 + j, 1]
             if t < st:
@@ -146,12 +146,12 @@ def leader_state(b, h, h0, prm: ti.template(), iprm: ti.template(), chg: ti.temp
 def target(b, i, a0, n, p, ma, mb, ka, kb, iprm: ti.template(), forms: ti.template()):
     """l_i: p (F2) or p + M_A A_i + M_B B_i (F1)."""
     r = p
-    if iprm[b, F1] != 0:
-        f = iprm[b, F0] + ka * n + i - a0
+    if iprm[b, IP.F1] != 0:
+        f = iprm[b, IP.F0] + ka * n + i - a0
         r += ti.math.vec2(ma[0] * forms[f, 0] + ma[1] * forms[f, 1],
                           ma[2] * forms[f, 0] + ma[3] * forms[f, 1])
         if kb >= 0:
-            g = iprm[b, F0] + kb * n + i - a0
+            g = iprm[b, IP.F0] + kb * n + i - a0
             r += ti.math.vec2(mb[0] * forms[g, 0] + mb[1] * forms[g, 1],
                               mb[2] * forms[g, 0] + mb[3] * forms[g, 1])
     return r
@@ -162,11 +162,11 @@ def rate(b, i, a0, n, src: ti.template(), lp, ma, mb, ka, kb, prm: ti.template()
           iprm: ti.template(), forms: ti.template()):
     """(rdot_x, rdot_y, coincident neighbours) of agent i at the positions `src`."""
     xi = ti.math.vec2(src[i, 0], src[i, 1])
-    r2 = prm[b, R2]
-    gk = iprm[b, GKIND]
-    kg = prm[b, KG]
-    d = prm[b, D]
-    d2 = prm[b, D2]
+    r2 = prm[b, P.R2]
+    gk = iprm[b, IP.GKIND]
+    kg = prm[b, P.KG]
+    d = prm[b, P.D]
+    d2 = prm[b, P.D2]
     acc = ti.math.vec3(0.0)
     for j in range(a0, a0 + n):
         dv = ti.math.vec2(src[j, 0] - xi[0], src[j, 1] - xi[1])
@@ -178,8 +178,8 @@ def rate(b, i, a0, n, src: ti.template(), lp, ma, mb, ka, kb, prm: ti.template()
                 acc += ti.math.vec3(w * dv[0], w * dv[1], 0.0)
             else:
                 acc[2] += 1.0
-    v = attract(target(b, i, a0, n, lp, ma, mb, ka, kb, iprm, forms) - xi, iprm[b, FKIND],
-                 prm[b, FA], prm[b, FB])
+    v = attract(target(b, i, a0, n, lp, ma, mb, ka, kb, iprm, forms) - xi, iprm[b, IP.FKIND],
+                 prm[b, P.FA], prm[b, P.FB])
     return ti.math.vec3(v[0] + acc[0], v[1] + acc[1], acc[2])
 
 
@@ -206,9 +206,9 @@ def runaway(b, a0, n, src: ti.template(), prm: ti.template(), iprm: ti.template(
     cause = -1
     if bad != 0:
         cause = 2
-    elif extent / prm[b, CELL] > MAX_CELLS_ACROSS:
+    elif extent / prm[b, P.CELL] > MAX_CELLS_ACROSS:
         cause = 3
-        prm[b, EXTENT] = extent
+        prm[b, P.EXTENT] = extent
     if cause >= 0:
-        iprm[b, CAUSE] = cause
+        iprm[b, IP.CAUSE] = cause
     return ti.cast(cause >= 0, ti.i32)

@@ -34,6 +34,7 @@ from ...space import rng
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import union_serial
 from ...space.grid import MAX_CELLS_ACROSS, WIDEN
+from ...space.params import Slots
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
@@ -41,12 +42,10 @@ ALL_PAIRS_N = 48  # at or below this N every pair is tested (fewer operations th
 TWO_PI = 2 * np.pi
 
 # Per-replica parameter slots: prm (f64) and iprm (i32).
-R2, V0DT, ETA, G, L, THETA0, RADIUS = range(7)
-N_PRM = 8
-(STEPS, EVERY, TRACK, NOBS, BAD, LINKED, LONGEST, OPEN, CAUSE, MOVE_NEW, WANT_COMPONENTS,
- WANT_SPREAD) = range(12)
-N_IPRM = 12
-# Why a replica stopped (iprm[CAUSE]), as the per-step path words it.
+P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0", "RADIUS")
+IP = Slots("STEPS", "EVERY", "TRACK", "NOBS", "BAD", "LINKED", "LONGEST", "OPEN", "CAUSE",
+           "MOVE_NEW", "WANT_COMPONENTS", "WANT_SPREAD")
+# Why a replica stopped (iprm[IP.CAUSE]), as the per-step path words it.
 CAUSES = (
     ("heading/position",
      "non-finite input (v0 * dt or the initial state too large for float64)"),
@@ -284,7 +283,7 @@ def advance_kernel(rule: int, periodic: bool):
         obs[row, 0] = s
         obs[row, 1] = ti.sqrt(sx * sx + sy * sy) / n
         spread = 0.0
-        if iprm[b, WANT_SPREAD] == 0:
+        if iprm[b, IP.WANT_SPREAD] == 0:
             spread = ti.math.nan  # not asked for (recording.observables)
         elif ti.static(vicsek):
             spread = circular_spread(a0, n, ps, arc_lo, arc_hi)
@@ -299,7 +298,7 @@ def advance_kernel(rule: int, periodic: bool):
         if ti.static(rule == RULES["leader"]):
             err = 0.0
             for k in range(a0, a0 + n):
-                err = ti.max(err, ti.abs(ps[k, 2] - prm[b, THETA0]))
+                err = ti.max(err, ti.abs(ps[k, 2] - prm[b, P.THETA0]))
             obs[row, 3] = err
         roots = 0
         dsum = 0
@@ -319,7 +318,7 @@ def advance_kernel(rule: int, periodic: bool):
         obs[row, 6] = dmin
         obs[row, 7] = dmax
         obs[row, 8] = iso
-        obs[row, 9] = iprm[b, LINKED]
+        obs[row, 9] = iprm[b, IP.LINKED]
 
     @ti.func
     def close_linked(b, a0, n, s, parent_u: ti.template(), iprm: ti.template()):
@@ -330,9 +329,9 @@ def advance_kernel(rule: int, periodic: bool):
             if parent_u[i] == i:
                 roots += 1
         if roots == 1:
-            iprm[b, LINKED] += 1
-            iprm[b, LONGEST] = ti.max(iprm[b, LONGEST], s + 1 - iprm[b, OPEN])
-            iprm[b, OPEN] = s + 1
+            iprm[b, IP.LINKED] += 1
+            iprm[b, IP.LONGEST] = ti.max(iprm[b, IP.LONGEST], s + 1 - iprm[b, IP.OPEN])
+            iprm[b, IP.OPEN] = s + 1
             for i in range(a0, a0 + n):
                 parent_u[i] = i
 
@@ -350,11 +349,11 @@ def advance_kernel(rule: int, periodic: bool):
             if nrm > 0.0:  # arg(0) = 0, as atan2(0, 0)
                 e_new = ti.math.vec2(acc[0], acc[1]) * (1.0 / nrm)
         elif ti.static(rule == RULES["laplacian"]):
-            new = th - (acc[2] * th - acc[0]) / prm[b, G]  # eq. 18
+            new = th - (acc[2] * th - acc[0]) / prm[b, P.G]  # eq. 18
         else:
             new = acc[0] / acc[2]  # eq. 1-2 (and 22 for the leader)
-        if prm[b, ETA] > 0.0:
-            noise = prm[b, ETA] * (rng.uniform(_key(kseed[b], s), i - a0) - 0.5)
+        if prm[b, P.ETA] > 0.0:
+            noise = prm[b, P.ETA] * (rng.uniform(_key(kseed[b], s), i - a0) - 0.5)
             if ti.static(vicsek):
                 cn = ti.cos(noise)  # rotate e_new by the noise angle
                 sn = ti.sin(noise)
@@ -364,13 +363,13 @@ def advance_kernel(rule: int, periodic: bool):
                 new += noise
         if ti.static(rule == RULES["leader"]):
             if i == a0:
-                new = prm[b, THETA0]
+                new = prm[b, P.THETA0]
         if ti.static(not vicsek):
             e_new = ti.math.vec2(ti.cos(new), ti.sin(new))
         e = ti.math.vec2(ew[i, 0], ew[i, 1])  # e(theta_i(s))
-        if iprm[b, MOVE_NEW]:
+        if iprm[b, IP.MOVE_NEW]:
             e = e_new
-        x = ti.math.vec2(ps[k, 0], ps[k, 1]) + prm[b, V0DT] * e
+        x = ti.math.vec2(ps[k, 0], ps[k, 1]) + prm[b, P.V0DT] * e
         if ti.static(periodic):
             for c in ti.static(range(2)):
                 if x[c] < 0.0 or x[c] >= Lb:  # wrapped only when it left the box
@@ -397,20 +396,20 @@ def advance_kernel(rule: int, periodic: bool):
                 n = aoff[b + 1] - a0
                 c0 = coff[b]
                 cap = coff[b + 1] - c0 - 1
-                Lb = prm[b, L]
-                r2 = prm[b, R2]
-                steps = iprm[b, STEPS]
-                every = iprm[b, EVERY]
-                track = iprm[b, TRACK] != 0
+                Lb = prm[b, P.L]
+                r2 = prm[b, P.R2]
+                steps = iprm[b, IP.STEPS]
+                every = iprm[b, IP.EVERY]
+                track = iprm[b, IP.TRACK] != 0
                 s = s0
-                while s < s1 and s <= steps and iprm[b, BAD] < 0:
+                while s < s1 and s <= steps and iprm[b, IP.BAD] < 0:
                     observing = s % every == 0 or s == steps
-                    graph = observing and iprm[b, WANT_COMPONENTS] != 0
-                    nxy = build_cells(a0, n, c0, cap, Lb, prm[b, RADIUS], pos, ew, theta,
+                    graph = observing and iprm[b, IP.WANT_COMPONENTS] != 0
+                    nxy = build_cells(a0, n, c0, cap, Lb, prm[b, P.RADIUS], pos, ew, theta,
                                       ps, cell, cstart, cidx, parent)
                     if nxy[0] < 0:
-                        iprm[b, BAD] = s
-                        iprm[b, CAUSE] = 1
+                        iprm[b, IP.BAD] = s
+                        iprm[b, IP.CAUSE] = 1
                         break
                     nx = nxy[0]
                     ny = nxy[1]
@@ -441,15 +440,15 @@ def advance_kernel(rule: int, periodic: bool):
                             bad |= update(b, i, k, s, a0, acc, Lb, prm, iprm, kseed, ps, pos,
                                           ew, theta)
                     if observing:
-                        row = ooff[b] + iprm[b, NOBS]
-                        iprm[b, NOBS] += 1
+                        row = ooff[b] + iprm[b, IP.NOBS]
+                        iprm[b, IP.NOBS] += 1
                         observe(b, a0, n, s, row, ps, parent, deg, arc_lo, arc_hi, prm, iprm,
                                 obs)
                     if s < steps:
                         if track:
                             close_linked(b, a0, n, s, parent_u, iprm)
                         if bad != 0:
-                            iprm[b, BAD] = s
+                            iprm[b, IP.BAD] = s
                     s += 1
 
     return advance
@@ -476,8 +475,8 @@ class VicsekBatch(FusedBatch):
         self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
         total = int(self.aoff[-1])
         B = len(scenarios)
-        prm = np.zeros((B, N_PRM))
-        iprm = np.zeros((B, N_IPRM), dtype=np.int32)
+        prm = np.zeros((B, P.size))
+        iprm = np.zeros((B, IP.size), dtype=np.int32)
         kseed = np.zeros(B, dtype=np.uint32)
         pos = np.zeros((total, 2))
         theta = np.zeros(total)
@@ -487,13 +486,14 @@ class VicsekBatch(FusedBatch):
             r = sc.neighbours.radius
             L_ = sc.space.L if self.periodic else 0.0
             r2 = np.nextafter(r * r, np.inf) if sc.inclusive else r * r
-            prm[b, [R2, V0DT, ETA, G, L, THETA0, RADIUS]] = [
+            prm[b, [P.R2, P.V0DT, P.ETA, P.G, P.L, P.THETA0, P.RADIUS]] = [
                 r2, p.v0 * sc.time.dt, p.eta, p.g or 1.0, L_, p.leader_heading, r]
             track = p.track_linked_intervals
             track = sc.n_agents <= 100_000 if track is None else track
             self.track.append(track)
             chosen = set(sc.recording.observables or OBS)
-            iprm[b, [STEPS, EVERY, TRACK, BAD, MOVE_NEW, WANT_COMPONENTS, WANT_SPREAD]] = [
+            iprm[b, [IP.STEPS, IP.EVERY, IP.TRACK, IP.BAD, IP.MOVE_NEW, IP.WANT_COMPONENTS,
+                     IP.WANT_SPREAD]] = [
                 sc.time.steps, sc.recording.observables_every, int(track), -1,
                 int(p.position_update == "new_heading"), int("components" in chosen),
                 int("heading_spread" in chosen)]
@@ -540,7 +540,7 @@ class VicsekBatch(FusedBatch):
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         o0 = self.ooff[b]
-        rows = self.host("obs")[o0:o0 + iprm[b, NOBS]]
+        rows = self.host("obs")[o0:o0 + iprm[b, IP.NOBS]]
         keep = [c for c in OBS if c != "step"]
         if self.rule != "leader":
             keep.remove("leader_error")
@@ -574,14 +574,14 @@ class VicsekBatch(FusedBatch):
         if not self.track[b]:
             return {}
         return {"linked_intervals": {
-            "count": int(iprm[b, LINKED]), "longest_steps": int(iprm[b, LONGEST]),
-            "open_since_step": int(iprm[b, OPEN])}}
+            "count": int(iprm[b, IP.LINKED]), "longest_steps": int(iprm[b, IP.LONGEST]),
+            "open_since_step": int(iprm[b, IP.OPEN])}}
 
     def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
-        step = int(iprm[b, BAD])
+        step = int(iprm[b, IP.BAD])
         if step < 0:
             return None
-        return (step, *CAUSES[iprm[b, CAUSE]])
+        return (step, *CAUSES[iprm[b, IP.CAUSE]])
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:
