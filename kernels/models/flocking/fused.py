@@ -775,7 +775,7 @@ def _obstacle_grid(p) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, flo
 def lambda2_rows(pos: np.ndarray, radii: np.ndarray | float, own: bool, inclusive: bool,
                  components: np.ndarray, max_agents: int) -> np.ndarray:
     """lambda_2 of the proximity graph of each snapshot (rows, N, 2), as the per-step path
-    computes it (`flocking_observe.algebraic_connectivity`): 0 when disconnected; at
+    computes it (`observe.algebraic_connectivity`): 0 when disconnected; at
     N <= 32 the same dense eigvalsh, stacked over the rows."""
     rows, n = pos.shape[:2]
     out = np.zeros(rows)

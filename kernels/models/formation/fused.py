@@ -13,7 +13,7 @@ the same numbers alone, in a batch, or cut into any windows.
 The leader is evaluated inside the kernel at every step (and RK4 half step): a straight
 path as p0 + q t until the arrival time, F1's schedule (rotations, morphs, smoothstep or
 linear) from the stored formations and their 2x2 weights. A spline path's arc-length
-timing is the host's (`formation_path.SplineTable`, the per-step path's arc-length
+timing is the host's (`path.SplineTable`, the per-step path's arc-length
 inversion vectorised over t): p(t), and q(t) at observation steps, are tabulated for each
 window (about 0.1 ms per step on the host, the fused path's largest cost for a spline).
 
@@ -23,7 +23,7 @@ per-step path coarse-grains there), N above `MAX_N` (all pairs would cost more t
 per-step path's grid), and N = 1 (no pair for the minimum distance).
 
 Here: the window kernel and the batch; the terms (f, g, leader, rdot_i, parameter slots)
-are in `formation_fused_terms`, the observables in `formation_fused_observe`.
+are in `fused_terms`, the observables in `fused_observe`.
 """
 
 from functools import cache

@@ -1,5 +1,5 @@
 """The fused M4 path's observation: every observable of the per-step path (FormationKernel
-.observe, formation_props' D1-D3) of one replica's state, into one row of its buffer."""
+.observe, props' D1-D3) of one replica's state, into one row of its buffer."""
 
 import numpy as np
 import taichi as ti
@@ -153,7 +153,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
         obs[row, 20] = ti.cast(iso == 0, ti.f64)  # D2
         obs[row, 22] = iso
         obs[row, 23] = comps
-        # D3 (formation_props.d3_holds): per component, the counter-clockwise gaps between
+        # D3 (props.d3_holds): per component, the counter-clockwise gaps between
         # the far agents' directions from r_0, in (angle, id) order; the successor is
         # found by a scan (O(n * component size), small at these N).
         for k in range(a0, a0 + n):

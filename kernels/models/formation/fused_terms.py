@@ -1,5 +1,5 @@
 """The fused M4 path's per-replica parameter slots and its Taichi terms, all pairs:
-f, g, F, G and the lag with runtime gains (formation_forces has them compile-time), the
+f, g, F, G and the lag with runtime gains (forces has them compile-time), the
 leader and F1's schedule at a time index, l_i, rdot_i, and the per-step grid's runaway
 check."""
 
@@ -18,7 +18,7 @@ IP = Slots("STEPS", "EVERY", "BAD", "CAUSE", "NOBS", "FKIND", "GKIND", "F1", "SP
 
 @ti.func
 def g_over_s(s, kind, kg, d, d2):
-    """g(s) / s for 0 < s < d (formation_forces.g_over_s with runtime gains)."""
+    """g(s) / s for 0 < s < d (forces.g_over_s with runtime gains)."""
     r = 0.0
     if kind == G_KINDS["inverse"]:
         r = -kg * (1.0 / s - 1.0 / d) / s
@@ -29,7 +29,7 @@ def g_over_s(s, kind, kg, d, d2):
 
 @ti.func
 def pair_energy(s, kind, kg, d, d2):
-    """G(s) = int_d^s g >= 0 for 0 < s < d (formation_forces.pair_energy)."""
+    """G(s) = int_d^s g >= 0 for 0 < s < d (forces.pair_energy)."""
     e = 0.0
     if kind == G_KINDS["inverse"]:
         e = kg * (ti.log(d / s) + s / d - 1.0)
@@ -40,7 +40,7 @@ def pair_energy(s, kind, kg, d, d2):
 
 @ti.func
 def attract(z, kind, fa, fb):
-    """f(|z|) z / |z| (formation_forces.attract with runtime gains)."""
+    """f(|z|) z / |z| (forces.attract with runtime gains)."""
     v = ti.math.vec2(0.0)
     if kind == F_KINDS["linear"]:
         v = fa * z
@@ -55,7 +55,7 @@ def attract(z, kind, fa, fb):
 
 @ti.func
 def attraction_energy(s, kind, fa, fb):
-    """F(s) = int_0^s f (formation_forces.attraction_energy)."""
+    """F(s) = int_0^s f (forces.attraction_energy)."""
     e = 0.0
     if kind == F_KINDS["linear"]:
         e = 0.5 * fa * s * s
@@ -69,7 +69,7 @@ def attraction_energy(s, kind, fa, fb):
 
 @ti.func
 def lag_length(qn, kind, fa, fb):
-    """|a| with f(|a|) = |q| (eq. 8; formation_forces.lag_length)."""
+    """|a| with f(|a|) = |q| (eq. 8; forces.lag_length)."""
     a = 0.0
     if kind == F_KINDS["linear"]:
         a = qn / fa

@@ -7,7 +7,7 @@ Right-hand side, for every agent at once from the state at time t (eq. 1-2, 6, 1
 Integrators: explicit Euler r(t + dt) = r(t) + dt rdot(t); classical RK4 with stages at t,
 t + dt/2, t + dt (each stage re-buckets its positions, so neighbours are always exact).
 Neighbours come from the uniform grid (cell = d); g(d) = 0, so < and <= give the same forces.
-Above `max_exact_candidates` an Euler step coarse-grains far pairs (formation_dense.py).
+Above `max_exact_candidates` an Euler step coarse-grains far pairs (dense.py).
 Two agents at the same position (g singular) stop the run.
 
 Observables (at observation steps only): formation error against r_id + a with the lag a of
