@@ -134,7 +134,7 @@ class Scene:
                 a["offsets"].set_segments(np.stack(
                     [np.repeat(lead.leader[None, :], len(lead.targets), 0), lead.targets],
                     axis=1))
-        name = run.scenario.name or run.kind
+        name = run.name
         a["title"].set_text(f"{name}: N = {run.n_agents}, t = {fr.time:.4g} "
                             f"(step {fr.step})")
         return SnapshotInfo(k, fr.step, fr.time, self.mode, agents, edges_drawn, trails_drawn)
