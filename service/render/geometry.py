@@ -45,12 +45,13 @@ def _all_pairs(pos: np.ndarray, radius: float, inclusive: bool, box: float | Non
     found = []
     for start in range(0, n, _BLOCK):
         rows = np.arange(start, min(start + _BLOCK, n))
-        d = displacement(pos[rows, None, :], pos[None, :, :], box)
+        # only the columns j >= start: pairs with j < start were found by earlier blocks
+        d = displacement(pos[rows, None, :], pos[None, start:, :], box)
         dist = np.hypot(d[..., 0], d[..., 1])
         near = dist <= radius if inclusive else dist < radius
-        near &= np.arange(n)[None, :] > rows[:, None]  # each pair once, i < j
+        near &= np.arange(start, n)[None, :] > rows[:, None]  # each pair once, i < j
         i, j = np.nonzero(near)
-        found.append(np.column_stack([rows[i], j]))
+        found.append(np.column_stack([rows[i], start + j]))
     return np.concatenate(found).astype(np.int64) if found else np.zeros((0, 2), np.int64)
 
 
