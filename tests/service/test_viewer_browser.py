@@ -48,7 +48,9 @@ class Watched:
         self.page.on("console", lambda m: self.errors.append(m.text) if m.type == "error"
                      else None)
         self.page.on("pageerror", lambda e: self.errors.append(str(e)))
-        self.page.on("request", lambda r: self.hosts.add(urlsplit(r.url).hostname or r.url))
+        # downloads are blob: URLs of this origin
+        self.page.on("request", lambda r: self.hosts.add(
+            urlsplit(r.url.removeprefix("blob:")).hostname or r.url))
         self.page.goto(url)
         self.page.wait_for_selector("#preset option", state="attached")
 
@@ -201,6 +203,10 @@ def test_sweep_list_follows_a_sweep_submitted_from_the_page(browser, server):
     assert page.text_content("#job-status") == "succeeded"
     page.wait_for_selector("#downloads button >> nth=2")
     assert page.locator("#downloads button").count() == 3
+    with page.expect_download() as download:
+        page.click("#downloads button >> text=table.csv")
+    header = Path(download.value.path()).read_text().splitlines()[0].split(",")
+    assert "model.eta" in header and "polarization_mean" in header, header
     page.wait_for_function(
         "() => document.querySelector('#plot-legend').textContent.includes('model.eta')")
     assert canvas_ink(page, "#plot") > 0.001
@@ -226,3 +232,23 @@ def test_api_docs_render_offline(browser, server, path, rendered):
     assert not errors, errors
     assert hosts == {"127.0.0.1"}, hosts
     page.close()
+
+
+def test_cancel_from_the_page(browser, server):
+    w = Watched(browser, server.url + "/")
+    page = w.page
+    page.select_option("#preset", "vicsek-1995")
+    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
+    page.fill('#fields .field[data-path="time.steps"] input', "200000")
+    page.fill('#fields .field[data-path="recording.every"] input', "0")  # within the limits
+    page.click("#submit")
+    page.wait_for_function("() => document.querySelector('#job-status').textContent === "
+                           "'running'", timeout=60_000)
+    page.click("#cancel")
+    page.wait_for_function("() => document.querySelector('#job-status').textContent === "
+                           "'cancelled'", timeout=60_000)
+    assert page.is_disabled("#cancel")
+    job_id = page.text_content("#job-id")
+    assert httpx.get(f"{server.url}/v1/jobs/{job_id}").json()["status"] == "cancelled"
+    assert not w.errors, w.errors
+    assert w.hosts == {"127.0.0.1"}, w.hosts
