@@ -210,6 +210,9 @@ def test_sweep_list_follows_a_sweep_submitted_from_the_page(browser, server):
     page.wait_for_function(
         "() => document.querySelector('#plot-legend').textContent.includes('model.eta')")
     assert canvas_ink(page, "#plot") > 0.001
+    if DOCS_IMG:
+        page.evaluate("window.scrollTo(0, 0)")
+        page.screenshot(path=str(Path(DOCS_IMG) / "viewer_sweep.png"))
     assert not w.errors, w.errors
     assert w.hosts == {"127.0.0.1"}, w.hosts
 

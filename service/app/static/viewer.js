@@ -344,6 +344,7 @@ async function selectJob(id) {
   state.selectedSweep = null;
   markSelected();
   $("panel-kind").textContent = "Job";
+  $("plot-title").textContent = "Observables";
   $("player").hidden = false;
   $("downloads").replaceChildren();
   clearPlot();
@@ -433,6 +434,7 @@ async function selectSweep(id) {
   state.selectedSweep = id;
   markSelected();
   $("panel-kind").textContent = "Sweep";
+  $("plot-title").textContent = "Measures";
   $("player").hidden = true;  // a sweep has no frames of its own
   $("downloads").replaceChildren();
   clearPlot();
