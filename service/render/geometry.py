@@ -19,7 +19,7 @@ import numpy as np
 from .run_data import RunData
 
 BRUTE_FORCE_MAX = 4096  # agents: all pairs in numpy blocks; above, scipy's k-d tree
-_BLOCK = 512  # rows of the pair-distance matrix at a time (512 x 4096 doubles = 16 MiB)
+_BLOCK = 512  # rows of the pair-distance matrix at a time (16 MiB per temporary at 4096)
 
 
 def metric_edges(pos: np.ndarray, radius: float, inclusive: bool, box: float | None

@@ -60,11 +60,19 @@ class RunData:
             self.name: str = self.doc.get("name") or self.kind
             nb = self.doc.get("neighbours")
             self.radius: float | None = float(nb["radius"]) if nb else None
-            chosen = nb.get("inclusive") if nb else None
-            self.inclusive: bool = (PAPER_INCLUSIVE.get(self.kind, True) if chosen is None
-                                    else bool(chosen))
         except (ValueError, KeyError, TypeError) as exc:
             raise RenderInputError(f"{self.folder}: unreadable run files: {exc!r}") from exc
+
+    @property
+    def inclusive(self) -> bool:
+        """The neighbourhood test in force (`<=` when True): the scenario's, else the
+        paper's."""
+        chosen = (self.doc.get("neighbours") or {}).get("inclusive")
+        if chosen is not None:
+            return bool(chosen)
+        if self.kind in PAPER_INCLUSIVE:
+            return PAPER_INCLUSIVE[self.kind]
+        return self.scenario.inclusive  # a family this table does not know yet
 
     @cached_property
     def scenario(self) -> Scenario:
