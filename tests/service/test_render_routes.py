@@ -111,6 +111,9 @@ def test_render_routes_need_the_api_key(make_server):
         # the viewer page itself carries no data: it loads, then asks for the key
         page = http.get("/")
         assert page.status_code == 200 and "flocklab viewer" in page.text
+        # the API description needs the key, so the docs pages are off
+        for docs in ("/docs", "/redoc", "/docs-redoc.js", "/docs-assets/swagger-ui.css"):
+            assert http.get(docs).status_code == 404, docs
 
 
 def test_viewer_and_offline_api_docs(http):
