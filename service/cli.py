@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import signal
 import sys
@@ -409,6 +410,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("flocklab: interrupted", file=sys.stderr)
         return EXIT_RUN_FAILED
+    except BrokenPipeError:  # `flocklab models | head`: the reader left, not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
 
 
 if __name__ == "__main__":
