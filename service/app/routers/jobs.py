@@ -6,7 +6,7 @@ import base64
 import json
 import time
 from collections.abc import AsyncIterator
-from typing import Annotated
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, Header, Query, Request
 from fastapi.responses import JSONResponse, StreamingResponse
@@ -107,6 +107,10 @@ def list_jobs(
 
 
 @router.get("/{job_id}", response_model=JobView, summary="Get a job",
+            description="With `wait`, a long-poll: the answer comes when the job has "
+            "finished, or after `wait` seconds with the job as it is then. With "
+            "`until=change` it comes at the job's first change (status or progress) "
+            "instead: what a progress display polls with.",
             responses={401: {}, 404: {}, 422: {}})
 async def get_job_route(
     job_id: JobId,
@@ -114,27 +118,41 @@ async def get_job_route(
     settings: SettingsDep,
     hub: HubDep,
     wait: Annotated[float, Query(ge=0, le=60, description=(
-        "Long-poll: answer as soon as the job changes (status or progress) or is "
-        "finished, or after this many seconds."))] = 0,
+        "Long-poll: answer as soon as the job is finished (or, with until=change, as soon "
+        "as it changes), or after this many seconds."))] = 0,
+    until: Annotated[Literal["finished", "change"], Query(description=(
+        "What a long-poll waits for: the job's end (default) or its next change."))
+    ] = "finished",
 ) -> JobView:
     with hub.subscribe(str(job_id)) as changed:
         job = await run_in_threadpool(get_job, runtime, job_id)
-        if wait > 0 and not job.terminal and await wait_for_change(changed, wait):
+        deadline = time.monotonic() + wait
+        while not job.terminal and not hub.closing:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0 or not await wait_for_change(changed, remaining):
+                break
             job = await run_in_threadpool(get_job, runtime, job_id)
+            if until == "change":
+                break
     return job_view(job, settings.result_ttl_seconds)
 
 
 @router.post("/{job_id}/cancel", status_code=202, response_model=JobView,
              summary="Cancel a job",
              description="A queued job is cancelled at once; a running one is asked to stop "
-             "and is killed if it has not stopped after the grace period. Cancelling a "
-             "cancelled job is a no-op; any other finished job gives 409.",
+             "and is killed if it has not stopped after the grace period (cancelling it "
+             "again while it stops is a no-op). A finished job (succeeded, failed, "
+             "cancelled or timed out) gives 409 `job-finished` with `status_now`.",
              responses={401: {}, 404: {}, 409: {}, 422: {}})
 def cancel(job_id: JobId, runtime: RuntimeDep, settings: SettingsDep) -> JobView:
-    get_job(runtime, job_id)
-    job = runtime.store.request_cancel(str(job_id))
-    assert job is not None
-    if job.terminal and job.status != "cancelled":
+    before = get_job(runtime, job_id)
+    if not before.terminal:
+        job = runtime.store.request_cancel(str(job_id))
+        assert job is not None
+    else:
+        job = before
+    # Finished before this request (or, racing it, by other means than a cancel).
+    if before.terminal or (job.terminal and job.status != "cancelled"):
         raise ProblemError(409, "job-finished", "Job already finished",
                            f"the job is {job.status}; it can no longer be cancelled",
                            status_now=job.status)
