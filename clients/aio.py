@@ -237,9 +237,9 @@ class AsyncSweepJob:
         s = self.state
         return f"<AsyncSweepJob {s.id} {s.status} {s.runs_done}/{s.runs_total} runs>"
 
-    async def status(self, wait: float = 0.0) -> SweepStatus:
-        params = {"wait": wait} if wait > 0 else None
-        r = await self.client.request("GET", f"/v1/sweeps/{self.id}", params=params,
+    async def status(self, wait: float = 0.0, until: str = "finished") -> SweepStatus:
+        r = await self.client.request("GET", f"/v1/sweeps/{self.id}",
+                                      params=_core.wait_params(wait, until),
                                       timeout=self.client.timeout + wait)
         self.state = SweepStatus.model_validate(r.json())
         return self.state
@@ -248,6 +248,7 @@ class AsyncSweepJob:
                    ) -> np.ndarray:
         deadline = None if timeout is None else time.monotonic() + timeout
         bar = _core.ProgressBar(progress)
+        until = "change" if bar.enabled else "finished"  # a bar shows every run's end
         try:
             bar.update(self.state)  # type: ignore[arg-type]
             while not self.done:
@@ -256,7 +257,8 @@ class AsyncSweepJob:
                 if remaining <= 0:
                     raise JobTimeout(f"sweep {self.id} still {self.state.status} after "
                                      f"{timeout} s")
-                await self.status(wait=min(_core.LONG_POLL_SECONDS, remaining))
+                await self.status(wait=min(_core.LONG_POLL_SECONDS, remaining),
+                                  until=until)
                 bar.update(self.state)  # type: ignore[arg-type]
         finally:
             bar.close()

@@ -269,10 +269,11 @@ class SweepJob:
         s = self.state
         return f"<SweepJob {s.id} {s.status} {s.runs_done}/{s.runs_total} runs>"
 
-    def status(self, wait: float = 0.0) -> SweepStatus:
-        """Re-read the sweep; with `wait`, long-poll until it changes or `wait` s pass."""
-        params = {"wait": wait} if wait > 0 else None
-        r = self.client.request("GET", f"/v1/sweeps/{self.id}", params=params,
+    def status(self, wait: float = 0.0, until: str = "finished") -> SweepStatus:
+        """Re-read the sweep; with `wait`, long-poll until it has finished (`until=
+        "change"`: until it changes) or `wait` s pass."""
+        r = self.client.request("GET", f"/v1/sweeps/{self.id}",
+                                params=_core.wait_params(wait, until),
                                 timeout=self.client.timeout + wait)
         self.state = SweepStatus.model_validate(r.json())
         return self.state
@@ -286,6 +287,7 @@ class SweepJob:
         """
         deadline = None if timeout is None else time.monotonic() + timeout
         bar = _core.ProgressBar(progress)
+        until = "change" if bar.enabled else "finished"  # a bar shows every run's end
         try:
             bar.update(self.state)  # type: ignore[arg-type]
             while not self.done:
@@ -294,7 +296,7 @@ class SweepJob:
                 if remaining <= 0:
                     raise JobTimeout(f"sweep {self.id} still {self.state.status} after "
                                      f"{timeout} s")
-                self.status(wait=min(_core.LONG_POLL_SECONDS, remaining))
+                self.status(wait=min(_core.LONG_POLL_SECONDS, remaining), until=until)
                 bar.update(self.state)  # type: ignore[arg-type]
         finally:
             bar.close()

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import base64
 import json
-import time
-from collections.abc import AsyncIterator
-from typing import Annotated, Literal
+from typing import Annotated
 
 from fastapi import APIRouter, Header, Query, Request
 from fastapi.responses import JSONResponse, StreamingResponse
@@ -17,14 +15,12 @@ from service.jobs import IdempotencyConflict, NewJob, QueueFull
 
 from ..admission import queue_full, queue_gauge
 from ..deps import HubDep, JobId, RuntimeDep, SettingsDep, get_job
-from ..events import wait_for_change
+from ..follow import Until, cancel_row, event_stream, long_poll
 from ..problems import ProblemError, invalid
 from ..submission import parse_submission
 from ..wire import EXAMPLE_SCENARIO, JobList, JobView, Status, job_view
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
-
-SSE_KEEPALIVE_SECONDS = 15.0
 
 
 @router.post(
@@ -120,20 +116,11 @@ async def get_job_route(
     wait: Annotated[float, Query(ge=0, le=60, description=(
         "Long-poll: answer as soon as the job is finished (or, with until=change, as soon "
         "as it changes), or after this many seconds."))] = 0,
-    until: Annotated[Literal["finished", "change"], Query(description=(
+    until: Annotated[Until, Query(description=(
         "What a long-poll waits for: the job's end (default) or its next change."))
     ] = "finished",
 ) -> JobView:
-    with hub.subscribe(str(job_id)) as changed:
-        job = await run_in_threadpool(get_job, runtime, job_id)
-        deadline = time.monotonic() + wait
-        while not job.terminal and not hub.closing:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0 or not await wait_for_change(changed, remaining):
-                break
-            job = await run_in_threadpool(get_job, runtime, job_id)
-            if until == "change":
-                break
+    job = await long_poll(hub, str(job_id), lambda: get_job(runtime, job_id), wait, until)
     return job_view(job, settings.result_ttl_seconds)
 
 
@@ -145,19 +132,7 @@ async def get_job_route(
              "cancelled or timed out) gives 409 `job-finished` with `status_now`.",
              responses={401: {}, 404: {}, 409: {}, 422: {}})
 def cancel(job_id: JobId, runtime: RuntimeDep, settings: SettingsDep) -> JobView:
-    before = get_job(runtime, job_id)
-    if not before.terminal:
-        job = runtime.store.request_cancel(str(job_id))
-        assert job is not None
-    else:
-        job = before
-    # Finished before this request (or, racing it, by other means than a cancel).
-    if before.terminal or (job.terminal and job.status != "cancelled"):
-        raise ProblemError(409, "job-finished", "Job already finished",
-                           f"the job is {job.status}; it can no longer be cancelled",
-                           status_now=job.status)
-    if job.status == "running":
-        runtime.supervisor.cancel(job.id)
+    job = cancel_row(runtime, lambda: get_job(runtime, job_id), "job")
     return job_view(job, settings.result_ttl_seconds)
 
 
@@ -171,27 +146,8 @@ def cancel(job_id: JobId, runtime: RuntimeDep, settings: SettingsDep) -> JobView
 async def events(job_id: JobId, runtime: RuntimeDep, settings: SettingsDep, hub: HubDep
                  ) -> StreamingResponse:
     await run_in_threadpool(get_job, runtime, job_id)
-
-    async def stream() -> AsyncIterator[str]:
-        last = None
-        with hub.subscribe(str(job_id)) as changed:
-            while True:
-                job = await run_in_threadpool(get_job, runtime, job_id)
-                view = job_view(job, settings.result_ttl_seconds).model_dump_json()
-                if view != last:
-                    last = view
-                    yield f"event: job\ndata: {view}\n\n"
-                if job.terminal:
-                    yield "event: end\ndata: {}\n\n"
-                    return
-                if hub.closing:  # the server is shutting down: reconnect later
-                    yield "event: shutdown\ndata: {}\n\n"
-                    return
-                if not await wait_for_change(changed, SSE_KEEPALIVE_SECONDS):
-                    yield f": keep-alive {time.time():.0f}\n\n"
-
-    return StreamingResponse(stream(), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
+    return event_stream(hub, str(job_id), lambda: get_job(runtime, job_id),
+                        lambda j: job_view(j, settings.result_ttl_seconds), "job")
 
 
 def _encode_cursor(seq: int) -> str:
