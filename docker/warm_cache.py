@@ -20,6 +20,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from kernels import engine, runtime
 from schemas import PRESETS, Scenario, get_preset
 from schemas.sweep import is_sweep_document, load_sweep
@@ -59,16 +61,24 @@ def shortened(sc: Scenario, threads: int) -> Scenario:
     return Scenario.model_validate(doc)
 
 
+class Discard:
+    """A frame sink that drops the frames: with a sink the engine records frames as a real
+    run does, through kernels (and step windows) a run without one never uses."""
+
+    def frame(self, step: int, time: float, arrays: dict[str, np.ndarray]) -> None:
+        del step, time, arrays
+
+
 def warm(name: str, sc: Scenario) -> None:
     """Compile `sc`'s kernels on its own path and on the per-step path."""
     t0 = time.perf_counter()
-    paths = [engine.run(sc).extra.get("engine_path", "?")]
+    paths = [engine.run(sc, sink=Discard()).extra.get("engine_path", "?")]
     if paths[0] == "fused":
         # The per-step path runs these models above FUSED_MAX_N (or off the CPU): the
         # bound is read at each call, so lowering it here routes the run there.
         saved, engine.FUSED_MAX_N = engine.FUSED_MAX_N, -1
         try:
-            paths.append(engine.run(sc).extra.get("engine_path", "?"))
+            paths.append(engine.run(sc, sink=Discard()).extra.get("engine_path", "?"))
         finally:
             engine.FUSED_MAX_N = saved
     print(f"warm: {name} N={sc.n_agents} threads={sc.threads} paths={'+'.join(paths)} "
