@@ -67,8 +67,10 @@ chown "$uid:$uid" "$work/out"
 as_user() {  # a command in the image as uid:uid, /out being the user-owned directory
     buildah run --isolation chroot --user "$uid:$uid" --volume "$work/out:/out" "$ctr" -- "$@"
 }
-kernels() { buildah run --isolation chroot "$ctr" -- sh -c \
-    'find "$FLOCKLAB_TAICHI_CACHE" -name "*.tic" | wc -l'; }
+# Kernels in the container's Taichi cache (one .tic file each), counted from the host.
+cache_dir="$(buildah mount "$ctr")/cache/taichi"
+[[ -d "$cache_dir" ]] || fail "the image has no /cache/taichi"
+kernels() { find "$cache_dir" -name '*.tic' | wc -l; }
 cached="$(kernels)"
 say "warmed cache: $cached kernels"
 
