@@ -111,10 +111,12 @@ rows="$(($(wc -l <"$work/out/sweep/table.csv") - 1))"
 say "sweep examples/sweep-fig2a-reduced.json: ${sweep_s} s, table.csv $rows rows"
 
 # The image's default command as its own user, on loopback, until the health check answers.
-mapfile -t cmd < <(buildah inspect --format '{{json .Docker.Config.Cmd}}' "$image" \
-    | python3 -c 'import json, sys; print("\n".join(json.load(sys.stdin)))')
-mapfile -t health < <(buildah inspect --format '{{json .Docker.Config.Healthcheck.Test}}' \
-    "$image" | python3 -c 'import json, sys; print("\n".join(json.load(sys.stdin)[1:]))')
+config() {  # a list from the image's Docker config, one item a line (from item $2 on)
+    buildah inspect --type image "$image" | python3 -c 'import json, sys
+print("\n".join(json.load(sys.stdin)["Docker"]["config"]'"$1"'['"$2"':]))'
+}
+mapfile -t cmd < <(config '["Cmd"]' 0)
+mapfile -t health < <(config '["Healthcheck"]["Test"]' 1)
 ((${#health[@]})) || fail "the image has no health check"
 t0="$(date +%s.%N)"
 buildah run --isolation chroot --env FLOCKLAB_HOST=127.0.0.1 --env FLOCKLAB_PORT="$port" \
