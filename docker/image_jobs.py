@@ -34,11 +34,10 @@ def main(url: str) -> int:
             job.wait(timeout=300, progress=False)
             seconds = time.perf_counter() - t0
             summary = job.metrics()["summary"] if job.status == "succeeded" else {}
-            extra = summary.get("extra", {})
             print(json.dumps({"model": family, "preset": preset, "status": job.status,
                               "first_job_seconds": round(seconds, 2),
-                              "setup_seconds": extra.get("setup_seconds"),
-                              "engine_path": extra.get("engine_path"),
+                              "setup_seconds": summary.get("setup_seconds"),
+                              "engine_path": summary.get("engine_path"),
                               "wall_seconds": summary.get("wall_seconds")}),
                   flush=True)
             failed += job.status != "succeeded"

@@ -19,11 +19,14 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Literal, get_args, get_origin
 
 import numpy as np
+from pydantic import ValidationError
 
 from kernels import engine, runtime
 from schemas import PRESETS, Scenario, get_preset
+from schemas.catalog import MODELS
 from schemas.sweep import is_sweep_document, load_sweep
 from schemas.sweep_presets import SWEEP_PRESETS, get_sweep_preset
 
@@ -34,7 +37,8 @@ RULE_VARIANTS = [{"rule": "average"}, {"rule": "laplacian", "g": 301.0}]
 
 
 def scenarios(examples: Path) -> list[tuple[str, Scenario]]:
-    """Every preset, the rule variants, each example scenario and first sweep run, by name."""
+    """Every preset, the rule variants, each example scenario, the first run of each sweep
+    and the option variants, by name."""
     out = [(f"preset:{name}", get_preset(name)) for name in sorted(PRESETS)]
     base = get_preset("vicsek-1995").model_dump(mode="json")
     for fields in RULE_VARIANTS:
@@ -48,7 +52,39 @@ def scenarios(examples: Path) -> list[tuple[str, Scenario]]:
             out.append((path.name, Scenario.model_validate(doc)))
     out += [(f"sweep:{name}[0]", get_sweep_preset(name).expand()[0].scenario)
             for name in sorted(SWEEP_PRESETS)]
+    return out + option_variants(out)
+
+
+def option_variants(found: list[tuple[str, Scenario]]) -> list[tuple[str, Scenario]]:
+    """For each model's option (a field with a fixed set of values: integrator, neighbour
+    search, ...) every value no scenario in `found` uses, set on that model's first
+    scenario that accepts it; kernels differ by these."""
+    out = []
+    for kind, cls in MODELS.items():
+        bases = [sc for _, sc in found if sc.model.kind == kind]
+        for name, field in cls.model_fields.items():
+            if name == "kind" or get_origin(field.annotation) is not Literal or not bases:
+                continue
+            used = {getattr(sc.model, name) for sc in bases}
+            for value in get_args(field.annotation):
+                if value not in used:
+                    out += _variant(bases, kind, name, value)
     return out
+
+
+def _variant(bases: list[Scenario], kind: str, name: str,
+             value: str) -> list[tuple[str, Scenario]]:
+    """`value` for option `name` on the first of `bases` the schema accepts it on."""
+    reason = ""
+    for sc in bases:
+        doc = sc.model_dump(mode="json")
+        doc["model"][name] = value
+        try:
+            return [(f"{kind} {name}={value}", Scenario.model_validate(doc))]
+        except ValidationError as exc:
+            reason = exc.errors()[0]["msg"]
+    print(f"warm: skipped {kind} {name}={value}: {reason}", flush=True)
+    return []
 
 
 def shortened(sc: Scenario, threads: int) -> Scenario:
