@@ -1,4 +1,3 @@
-# syntax=docker/dockerfile:1
 # flocklab: the job service (default command) and the batch CLI. docs/CONTAINER.md has it all.
 #
 #   docker build -t flocklab .                                   # CPU image
@@ -7,33 +6,30 @@
 #       flocklab run examples/vicsek.json --out /out/vicsek       # batch, written as you
 #
 # CUDA image: an nvidia/cuda runtime base; the driver comes from the host (--gpus all):
-#   docker build --build-arg FLAVOUR=cuda -t flocklab:cuda .
+#   docker build --build-arg BASE_IMAGE=nvidia/cuda:12.6.3-runtime-ubuntu24.04 -t flocklab:cuda .
 #   docker run --rm --gpus all flocklab:cuda python docker/probe_backend.py --backend cuda
 #
 # The build reads only this project's files (.dockerignore) and PyPI (pinned by
-# constraints.txt). Writable at run time: /data (job store, results) and /cache (Taichi's
-# compile cache, warmed here for every model), both volumes.
+# constraints.txt). `RUN --mount=type=cache` needs BuildKit (Docker's default builder
+# since 23.0), Buildah or Podman. Writable at run time: /data (job store, results) and
+# /cache (Taichi's compile cache, warmed here for every model), both volumes.
 
-ARG PYTHON_IMAGE=python:3.11-slim
-ARG CUDA_IMAGE=nvidia/cuda:12.6.3-runtime-ubuntu24.04
-ARG FLAVOUR=cpu
+# BASE_IMAGE: python:3.11-slim (CPU) or an nvidia/cuda runtime image (CUDA), see above.
+ARG BASE_IMAGE=python:3.11-slim
 
-FROM ${PYTHON_IMAGE} AS cpu-base
-# Taichi's extension links libX11 (manylinux lets wheels assume it); the slim image lacks it.
-RUN apt-get update \
- && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends libx11-6 \
+FROM ${BASE_IMAGE}
+# Taichi's extension links libX11 (manylinux lets wheels assume it); the slim image lacks
+# it. A base without Python (the nvidia/cuda images: Ubuntu 24.04) gets its Python 3.12,
+# for which constraints.txt's pins have wheels. Taichi's wheel carries its CUDA backend
+# and needs only the driver's libcuda, which the NVIDIA runtime mounts for --gpus (the
+# nvidia/cuda images already ask it for the compute capability).
+RUN pkgs="libx11-6" \
+ && { python3 -c "import ensurepip, venv" 2>/dev/null \
+      || pkgs="$pkgs python3 python3-venv ca-certificates"; } \
+ && apt-get update \
+ && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends $pkgs \
  && rm -rf /var/lib/apt/lists/*
 
-FROM ${CUDA_IMAGE} AS cuda-base
-# Ubuntu 24.04's Python 3.12 (constraints.txt's pins have 3.12 wheels). Taichi's wheel
-# carries its CUDA backend and needs only the driver's libcuda, which the NVIDIA runtime
-# mounts for --gpus; the base image already asks it for the compute capability.
-RUN apt-get update \
- && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
-        python3 python3-venv libx11-6 ca-certificates \
- && rm -rf /var/lib/apt/lists/*
-
-FROM ${FLAVOUR}-base AS image
 ARG FLOCKLAB_PORT=8000
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
