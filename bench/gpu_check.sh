@@ -74,7 +74,7 @@ step() {
 # ---- prerequisites -------------------------------------------------------------------
 say "flocklab GPU check: backend=$BACKEND dry_run=$DRY smoke=$SMOKE $(date -u +%FT%TZ)"
 say "git: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)  host: $(hostname)"
-if ! "$PY" -c "import kernels, service, taichi" 2>> "$LOG"; then
+if ! "$PY" -c "import flocklab.kernels, flocklab.service, taichi" 2>> "$LOG"; then
     say "prerequisite missing: install the project first (pip install -e '.[dev]')"
     exit 2
 fi
@@ -203,7 +203,7 @@ from pathlib import Path
 
 import httpx
 
-from service.serve import ServerProcess
+from flocklab.service.serve import ServerProcess
 
 backend, work, smoke = sys.argv[1], Path(sys.argv[2]), sys.argv[3] == "smoke"
 PRESETS = {"vicsek": "vicsek-1995", "flocking": "tjp-switching",

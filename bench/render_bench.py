@@ -29,7 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from schemas import Scenario
+from flocklab.schemas import Scenario
 
 
 def vicsek(n: int, steps: int, every: int) -> Scenario:
@@ -58,8 +58,8 @@ def main() -> None:
     p.add_argument("--only", choices=[c[0] for c in CASES], action="append",
                    help="run only this case (repeatable)")
     args = p.parse_args()
-    from service.execute import execute_to_dir
-    from service.render.cli import add_arguments, render
+    from flocklab.service.execute import execute_to_dir
+    from flocklab.service.render.cli import add_arguments, render
 
     root = args.keep or Path(tempfile.mkdtemp(prefix="render-bench-"))
     root.mkdir(parents=True, exist_ok=True)
@@ -76,7 +76,7 @@ def main() -> None:
         for _ in range(args.repeat):
             used = _children_cpu()
             t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "service.entry", "render", *argv],
+            subprocess.run([sys.executable, "-m", "flocklab.service.entry", "render", *argv],
                            check=True, capture_output=True)
             walls.append(time.perf_counter() - t0)
             cpus.append(_children_cpu() - used)

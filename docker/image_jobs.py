@@ -16,7 +16,7 @@ import json
 import sys
 import time
 
-from clients import Client
+from flocklab.clients import Client
 
 # One preset per model family (and per formation design), shortened.
 JOBS = [("vicsek", "vicsek-1995"), ("flocking", "tjp-switching"),

@@ -14,9 +14,9 @@ import ctypes
 import json
 import sys
 
-from kernels import engine, runtime
-from kernels.result import BackendUnavailable
-from schemas import Scenario
+from flocklab.kernels import engine, runtime
+from flocklab.kernels.result import BackendUnavailable
+from flocklab.schemas import Scenario
 
 TINY = {"model": {"kind": "vicsek", "eta": 0.5}, "space": {"kind": "periodic", "L": 4},
         "neighbours": {"radius": 1}, "initial": {"kind": "random", "N": 64},

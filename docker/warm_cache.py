@@ -24,11 +24,11 @@ from typing import Literal, get_args, get_origin
 import numpy as np
 from pydantic import ValidationError
 
-from kernels import engine, runtime
-from schemas import PRESETS, Scenario, get_preset
-from schemas.catalog import MODELS
-from schemas.sweep import is_sweep_document, load_sweep
-from schemas.sweep_presets import SWEEP_PRESETS, get_sweep_preset
+from flocklab.kernels import engine, runtime
+from flocklab.schemas import PRESETS, Scenario, get_preset
+from flocklab.schemas.catalog import MODELS
+from flocklab.schemas.sweep import is_sweep_document, load_sweep
+from flocklab.schemas.sweep_presets import SWEEP_PRESETS, get_sweep_preset
 
 WARM_STEPS = 3
 # Vicsek-family rules no preset uses (their kernels differ by rule): model fields merged

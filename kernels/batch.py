@@ -16,7 +16,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from schemas import Scenario
+from flocklab.schemas import Scenario
 
 from .result import FrameSink, RunResult
 

@@ -22,7 +22,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from schemas import (
+from flocklab.schemas import (
     PRESETS,
     FieldError,
     Scenario,
@@ -31,10 +31,10 @@ from schemas import (
     get_preset,
     parse_json_strict,
 )
-from schemas.paths import PathError, parse_assignment, set_path
-from schemas.sweep import Sweep, SweepError, describe_sweep, is_sweep_document, load_sweep
-from schemas.sweep_presets import SWEEP_PRESETS
-from schemas.vicsek_presets import DEFAULT_PRESET
+from flocklab.schemas.paths import PathError, parse_assignment, set_path
+from flocklab.schemas.sweep import Sweep, SweepError, describe_sweep, is_sweep_document, load_sweep
+from flocklab.schemas.sweep_presets import SWEEP_PRESETS
+from flocklab.schemas.vicsek_presets import DEFAULT_PRESET
 
 from .cli_extras import EXIT_MISSING_EXTRA, MissingExtra, require_extras, version
 from .cli_models import model_details, print_model
@@ -148,7 +148,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario, args.set or ())
     if args.backend:
         scenario = scenario.model_copy(update={"backend": args.backend})
-    from kernels import BackendUnavailable
+    from flocklab.kernels import BackendUnavailable
 
     from .execute import execute_to_dir
 
@@ -186,7 +186,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if not (out / "sweep.json").exists():
             raise BadInput(f"{out} holds no sweep; --overwrite replaces sweep folders only")
         shutil.rmtree(out)
-    from kernels import BackendUnavailable
+    from flocklab.kernels import BackendUnavailable
 
     from .sweeps.executors import ExecutorConfig, make_executor
     from .sweeps.ray_executor import ClusterError

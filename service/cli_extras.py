@@ -50,8 +50,7 @@ def require_extras(command: str) -> None:
 
 
 def version() -> str:
-    """The installed distribution's version (the source tree's when run uninstalled)."""
-    try:
-        return importlib.metadata.version("flocklab")
-    except importlib.metadata.PackageNotFoundError:
-        return "0.1.0"
+    """The installed distribution's version."""
+    import flocklab
+
+    return flocklab.__version__

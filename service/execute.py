@@ -24,10 +24,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from schemas import Scenario
+from flocklab.schemas import Scenario
 
 if TYPE_CHECKING:
-    from kernels import RunResult
+    from flocklab.kernels import RunResult
 
 ARTIFACTS = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5")
 
@@ -64,7 +64,7 @@ def execute_to_dir(
     """Run `scenario` and write its artifacts to `out_dir`. Returns the summary dict;
     `on_result` gets the engine's result before the folder is moved into place. A run
     that `should_stop` ended is written with status `stopped_status`."""
-    import kernels  # the engine: only where a simulation runs
+    from flocklab import kernels  # the engine: only where a simulation runs
 
     from .h5md import H5MDWriter
 

@@ -10,13 +10,13 @@ from pathlib import Path
 
 import h5py
 
-from service.cli_models import MODEL_DOCS, REFERENCES
+from flocklab.service.cli_models import MODEL_DOCS, REFERENCES
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def flocklab(*args, stdin=None):
-    return subprocess.run([sys.executable, "-m", "service.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "flocklab", *args], capture_output=True,
                           text=True, input=stdin, timeout=300)
 
 
@@ -83,7 +83,7 @@ def test_ctrl_c_keeps_what_the_run_computed(tmp_path):
     path = tmp_path / "long.json"
     path.write_text(json.dumps(scenario))
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "service.cli", "run", str(path), "--out",
+    proc = subprocess.Popen([sys.executable, "-m", "flocklab", "run", str(path), "--out",
                              str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     try:

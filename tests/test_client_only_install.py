@@ -2,8 +2,8 @@
 answer one line naming it and exit 4, with no traceback; the rest work.
 
 Two real, separate virtual environments: a fast one made here from the client's own
-dependencies (numpy, pydantic, httpx and theirs, linked from the test environment) with
-the checkout on its path, so taichi, h5py, scipy, fastapi and uvicorn are absent; and a
+dependencies (numpy, pydantic, httpx and theirs, linked from the test environment) and
+the checkout's editable install, so taichi, h5py, scipy, fastapi and uvicorn are absent; and a
 slow one made exactly as a user would, `pip install -e .` (about 40 s: marked slow).
 """
 
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from service.cli_extras import EXIT_MISSING_EXTRA
+from flocklab.service.cli_extras import EXIT_MISSING_EXTRA
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -39,14 +39,24 @@ def _link_client_modules(site: Path) -> None:
                 (site / src.name).symlink_to(src)
 
 
+def _link_editable_install(site: Path) -> None:
+    """This env's `pip install -e` of the checkout (its path hook, its import finder that
+    maps flocklab.* to the source folders, and its metadata), linked into `site`."""
+    here = Path(importlib.util.find_spec("numpy").origin).parents[1]
+    parts = [*here.glob("__editable__*flocklab*"), *here.glob("flocklab-*.dist-info")]
+    assert parts, "the checkout is not installed in this environment (pip install -e .)"
+    for src in parts:
+        (site / src.name).symlink_to(src)
+
+
 @pytest.fixture(scope="module")
 def client_env(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A venv holding only the client's dependencies, with the checkout on its path."""
+    """A venv holding only the client's dependencies and the checkout's editable install."""
     env = tmp_path_factory.mktemp("client-only") / "venv"
     venv.EnvBuilder(with_pip=False).create(env)
     site = _site_packages(env)
     _link_client_modules(site)
-    (site / "flocklab-checkout.pth").write_text(f"{ROOT}\n")
+    _link_editable_install(site)
     return env / "bin" / "python"
 
 
@@ -69,14 +79,14 @@ def _check_client_only(cli: list[str], python: Path, tmp_path: Path) -> None:
     valid = subprocess.run([*cli, "validate", "preset:vicsek-1995"], capture_output=True,
                            text=True, timeout=60)
     assert valid.returncode == 0 and "valid" in valid.stdout, valid.stderr
-    client = subprocess.run([str(python), "-c", "import clients, sys; "
-                             "print(clients.Client('http://127.0.0.1:1').base_url)"],
+    client = subprocess.run([str(python), "-c", "import flocklab; "
+                             "print(flocklab.Client('http://127.0.0.1:1').base_url)"],
                             capture_output=True, text=True, timeout=60)
     assert client.returncode == 0 and client.stdout.strip() == "http://127.0.0.1:1"
 
 
 def test_client_only_environment(client_env: Path, tmp_path: Path):
-    _check_client_only([str(client_env), "-m", "service.cli"], client_env, tmp_path)
+    _check_client_only([str(client_env), "-m", "flocklab"], client_env, tmp_path)
 
 
 @pytest.mark.slow

@@ -10,7 +10,7 @@ import importlib.util
 from pathlib import Path
 from typing import Literal, get_args, get_origin
 
-from schemas.catalog import MODELS
+from flocklab.schemas.catalog import MODELS
 
 ROOT = Path(__file__).resolve().parent.parent
 

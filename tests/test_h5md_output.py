@@ -6,9 +6,9 @@ import h5py
 import numpy as np
 import pytest
 
-from schemas import Scenario, get_preset
-from service.execute import execute_to_dir
-from service.h5md import image_is_exact
+from flocklab.schemas import Scenario, get_preset
+from flocklab.service.execute import execute_to_dir
+from flocklab.service.h5md import image_is_exact
 
 
 def fast_vicsek(every: int = 1, **recording) -> Scenario:

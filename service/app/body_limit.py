@@ -11,7 +11,7 @@ import json
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.jobs.problems import problem
+from flocklab.service.jobs.problems import problem
 
 from .problems import PROBLEM_MEDIA_TYPE
 

@@ -34,7 +34,7 @@ from typing import Any
 import h11
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-from service.jobs.problems import problem
+from flocklab.service.jobs.problems import problem
 
 log = logging.getLogger("flocklab.connections")
 

@@ -15,9 +15,9 @@ from fastapi.responses import JSONResponse
 from pydantic.json_schema import models_json_schema
 from starlette.concurrency import run_in_threadpool
 
-from schemas import Problem, Scenario
-from schemas.sweep import Sweep
-from service.jobs import JobRuntime
+from flocklab.schemas import Problem, Scenario
+from flocklab.schemas.sweep import Sweep
+from flocklab.service.jobs import JobRuntime
 
 from .admission import AdmissionMiddleware
 from .auth import require_api_key

@@ -16,7 +16,7 @@ from fastapi.responses import StreamingResponse
 from pydantic import BaseModel
 from starlette.concurrency import run_in_threadpool
 
-from service.jobs import Job, JobRuntime
+from flocklab.service.jobs import Job, JobRuntime
 
 from .events import ChangeHub, wait_for_change
 from .problems import ProblemError

@@ -15,8 +15,8 @@ from typing import Literal
 from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from service.jobs import Limits, SupervisorConfig
-from service.sweeps.executors import ExecutorConfig
+from flocklab.service.jobs import Limits, SupervisorConfig
+from flocklab.service.sweeps.executors import ExecutorConfig
 
 MiB = 2**20
 GiB = 2**30

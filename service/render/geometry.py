@@ -74,7 +74,7 @@ def interaction_edges(run: RunData, pos: np.ndarray) -> np.ndarray | None:
     """
     if run.kind == "flocking" and run.doc["model"].get("topology") == "fixed":
         model = run.scenario.model
-        from kernels.models.flocking.topology import build_edges
+        from flocklab.kernels.models.flocking.topology import build_edges
 
         u, v = build_edges(model.graph, run.n_agents, run.scenario.seed)
         return np.column_stack([u, v]).astype(np.int64)
@@ -112,7 +112,7 @@ def leaders(run: RunData, t: float) -> Leaders | None:
     if run.kind != "formation":
         return None
     model = run.scenario.model
-    from kernels.models.formation.path import make_path
+    from flocklab.kernels.models.formation.path import make_path
 
     obs = run.observables
     if "leader_x" in obs and len(obs["leader_x"]):
@@ -124,7 +124,7 @@ def leaders(run: RunData, t: float) -> Leaders | None:
     samples = np.array([path.position(s) for s in np.linspace(0.0, t_end, 400)])
     targets = None
     if model.design == "F1":
-        from kernels.models.formation.schedule import OffsetSchedule
+        from flocklab.kernels.models.formation.schedule import OffsetSchedule
 
         d = float(run.scenario.neighbours.radius)
         b = OffsetSchedule(model.formation, model.schedule, run.n_agents, d).at(t)

@@ -22,7 +22,7 @@ import numpy as np
 from .errors import RenderInputError
 
 if TYPE_CHECKING:
-    from schemas import Scenario
+    from flocklab.schemas import Scenario
 
 # Each model family's neighbourhood test when the scenario leaves `neighbours.inclusive`
 # unset: the models' `paper_inclusive` (tests/render check this table against schemas).
@@ -79,7 +79,7 @@ class RunData:
         """The validated scenario, for the overlays that need the typed model."""
         from pydantic import ValidationError
 
-        from schemas import Scenario
+        from flocklab.schemas import Scenario
 
         try:
             return Scenario.model_validate(self.doc)

@@ -28,7 +28,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from schemas.sweep import REPLICAS_PATH, Sweep, SweepRun
+from flocklab.schemas.sweep import REPLICAS_PATH, Sweep, SweepRun
 
 from .measures import replica_stats
 

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from service.serve import ServerProcess
+from flocklab.service.serve import ServerProcess
 
 ENV = {
     "FLOCKLAB_WARMUP_PRESET": "",

@@ -11,21 +11,21 @@ import sys
 import numpy as np
 import pytest
 
-from schemas import MODELS
-from service.render import geometry
-from service.render.run_data import PAPER_INCLUSIVE, RunData
+from flocklab.schemas import MODELS
+from flocklab.service.render import geometry
+from flocklab.service.render.run_data import PAPER_INCLUSIVE, RunData
 
 from .conftest import FAMILIES, assert_picture, read_image
 
-HEAVY = ("schemas", "pydantic", "kernels", "taichi", "scipy", "fastapi", "service.cli",
-         "service.app")
+HEAVY = ("flocklab.schemas", "pydantic", "flocklab.kernels", "taichi", "scipy", "fastapi",
+         "flocklab.service.cli", "flocklab.service.app")
 
 
 def test_render_command_skips_the_heavy_imports(runs, tmp_path):
     """The console script's entry (`service.entry:main`) drawing a snapshot with edges,
     in a fresh interpreter that then lists what it imported."""
     out = tmp_path / "v.png"
-    code = ("import sys, json; from service.entry import main; "
+    code = ("import sys, json; from flocklab.service.entry import main; "
             f"rc = main(['render', {str(runs['vicsek'])!r}, '--out', {str(out)!r}, "
             "'--edges', '--size', '400x400']); "
             "print(json.dumps({'rc': rc, 'modules': sorted(sys.modules)}))")
@@ -42,7 +42,7 @@ def test_render_command_skips_the_heavy_imports(runs, tmp_path):
 
 
 def test_console_script_passes_other_commands_through(tmp_path):
-    from service.entry import main
+    from flocklab.service.entry import main
 
     assert main(["presets"]) == 0
     assert main(["render", str(tmp_path / "missing"), "--out", str(tmp_path / "x.png")]) == 2

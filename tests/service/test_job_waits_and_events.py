@@ -10,7 +10,7 @@ import time
 import httpx
 import pytest
 
-import clients
+from flocklab import clients
 
 from .svc_helpers import assert_problem, long_scenario, scenario, submit, wait_for
 

@@ -11,7 +11,7 @@ import httpx
 import numpy as np
 import pytest
 
-import clients
+from flocklab import clients
 
 from .svc_helpers import assert_problem, long_scenario, scenario, submit, wait_for
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from schemas import Scenario
+from flocklab.schemas import Scenario
 
 from ...model import register_kernel
 from ...runtime import DevicePolicy

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from schemas.formation import FormationChange, FormationSpec
+from flocklab.schemas.formation import FormationChange, FormationSpec
 
 from .shapes import offsets, rotation
 

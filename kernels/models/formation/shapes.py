@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from schemas.formation import ExplicitFormation, FormationSpec, NamedFormation
+from flocklab.schemas.formation import ExplicitFormation, FormationSpec, NamedFormation
 
 _SQ3 = math.sqrt(3.0)
 

@@ -6,7 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter
 
-from schemas import PRESETS, describe_models, get_preset
+from flocklab.schemas import PRESETS, describe_models, get_preset
 
 from ..problems import ProblemError
 

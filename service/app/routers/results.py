@@ -19,7 +19,7 @@ from fastapi import APIRouter, Header, Query
 from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
-from service.jobs import Job, JobRuntime
+from flocklab.service.jobs import Job, JobRuntime
 
 from .. import trajectory as traj
 from ..deps import JobId, RuntimeDep, SettingsDep, get_job

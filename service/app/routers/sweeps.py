@@ -16,9 +16,9 @@ from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse, Response, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
-from schemas.status import SweepList, SweepStatus
-from service.jobs import IdempotencyConflict, Job, JobRuntime, NewJob, QueueFull
-from service.sweeps.tables import read_table
+from flocklab.schemas.status import SweepList, SweepStatus
+from flocklab.service.jobs import IdempotencyConflict, Job, JobRuntime, NewJob, QueueFull
+from flocklab.service.sweeps.tables import read_table
 
 from ..admission import queue_full, queue_gauge
 from ..deps import HubDep, RuntimeDep, SettingsDep, get_job
