@@ -128,7 +128,7 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path, taich
                                                                   monkeypatch):
     # One run per engine call, so a stop can land between runs (the engine batches the
     # runs it is given into one launch, and they all finish together).
-    monkeypatch.setattr("service.sweeps.executors.BATCH_RUNS", 1)
+    monkeypatch.setattr("flocklab.service.sweeps.executors.BATCH_RUNS", 1)
     sweep = small_sweep(measure={"va": MEASURES["va"]}, replicas=1)
     out = tmp_path / "resumed"
     seen = []

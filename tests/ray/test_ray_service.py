@@ -55,7 +55,8 @@ def wait_sweep(http: httpx.Client, sweep_id: str, until: Any = None, timeout: fl
                ) -> dict[str, Any]:
     deadline = time.monotonic() + timeout
     while True:
-        s = http.get(f"/v1/sweeps/{sweep_id}", params={"wait": 2}).json()
+        params = {"wait": 2, "until": "change"} if until else {"wait": 2}
+        s = http.get(f"/v1/sweeps/{sweep_id}", params=params).json()
         if until(s) if until else s["status"] in TERMINAL:
             return s
         assert time.monotonic() < deadline, f"sweep still {s['status']} after {timeout} s"

@@ -38,10 +38,11 @@ def submit(http: httpx.Client, body: dict[str, Any], **kw: Any) -> dict[str, Any
 
 def wait_for(http: httpx.Client, job_id: str, statuses: set[str] = TERMINAL,
              timeout: float = 60.0) -> dict[str, Any]:
-    """Long-poll until the job is in one of `statuses`."""
+    """Long-poll until the job is in one of `statuses` (looking at every change: a
+    non-final status may last less than one wait for the end)."""
     deadline = time.monotonic() + timeout
     while True:
-        job = http.get(f"/v1/jobs/{job_id}", params={"wait": 2}).json()
+        job = http.get(f"/v1/jobs/{job_id}", params={"wait": 2, "until": "change"}).json()
         if job["status"] in statuses:
             return job
         assert time.monotonic() < deadline, f"job still {job['status']} after {timeout} s"

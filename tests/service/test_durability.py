@@ -43,7 +43,7 @@ def _wait_running(http: httpx.Client, job_id: str) -> dict:
     """Until the job runs and has made progress (the worker is inside the engine)."""
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
-        job = http.get(f"/v1/jobs/{job_id}", params={"wait": 1}).json()
+        job = http.get(f"/v1/jobs/{job_id}", params={"wait": 1, "until": "change"}).json()
         if job["status"] == "running" and job["steps_done"] > 0:
             return job
         assert job["status"] in ("queued", "running"), job
