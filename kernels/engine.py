@@ -37,7 +37,7 @@ def run(
     frames every `recording.every` steps and at the end. A blow-up returns status
     "diverged" with the step and likely cause; what was recorded before it is kept.
     """
-    rt = runtime.ensure(scenario.backend, scenario.threads)
+    rt = runtime.ensure(scenario.backend, scenario.threads, scenario.precision)
     make = fused_batch(scenario, rt.backend)
     if make is not None:
         return batch.run_batch(make, [scenario], backend=rt.backend, sinks=[sink],
@@ -154,7 +154,7 @@ def run_batch(
         if should_stop is not None and should_stop():
             break
         first = scenarios[group[0]]
-        rt = runtime.ensure(first.backend, first.threads)
+        rt = runtime.ensure(first.backend, first.threads, first.precision)
         make = fused_batch(first, rt.backend)
         if make is None:
             done = [run(first, should_stop=should_stop)]
@@ -169,8 +169,8 @@ def run_batch(
 
 
 def _batches(scenarios: Sequence[Scenario]) -> list[list[int]]:
-    """Indices grouped into launches: same backend, threads and fused batch key, at most
-    BATCH_AGENTS agents each; a per-step scenario is a group of its own."""
+    """Indices grouped into launches: same backend, threads, precision and fused batch key,
+    at most BATCH_AGENTS agents each; a per-step scenario is a group of its own."""
     groups: dict[tuple, list[list[int]]] = {}
     out: list[list[int]] = []
     for i, sc in enumerate(scenarios):
@@ -179,7 +179,7 @@ def _batches(scenarios: Sequence[Scenario]) -> list[list[int]]:
         if key is None:
             out.append([i])
             continue
-        lanes = groups.setdefault((sc.backend, sc.threads, key), [[]])
+        lanes = groups.setdefault((sc.backend, sc.threads, sc.precision, key), [[]])
         if lanes[-1] and sum(scenarios[j].n_agents for j in lanes[-1]) + sc.n_agents > (
                 BATCH_AGENTS):
             lanes.append([])

@@ -186,6 +186,8 @@ class Recording(Strict):
 
 
 Backend = Literal["cpu", "cuda", "vulkan", "auto"]
+# The engine's floating-point type (the scenario's `precision`, not the frames' dtype).
+Precision = Literal["float64", "float32"]
 
 
 class Convergence(Strict):
