@@ -152,6 +152,13 @@ def as_real(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=real())
 
 
+def wide(a) -> np.ndarray:
+    """A device array on the host in float64 (no copy when it is float64 already): the
+    host-side observables sum over N agents, which float32 would accumulate with an error
+    growing with N (numpy sums a column of an (N, 2) array serially)."""
+    return a.to_numpy().astype(np.float64, copy=False)
+
+
 def next_above(x: float) -> float:
     """The next float above `x` in the kernels' precision: `d2 <= x` is `d2 < next_above(x)`
     in that type (a float64 nextafter would round back to x in float32)."""

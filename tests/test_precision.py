@@ -230,3 +230,16 @@ def test_float32_inclusive_radius_keeps_pairs_exactly_at_r(path):
             "time": {"steps": 1}, "precision": "float32"})
         res = kernels.run(sc)
         assert res.observables["degree_mean"][0] == degree, (inclusive, path)
+
+
+def test_long_float32_runs_take_the_per_step_path():
+    """The fused path's observation rows hold step numbers in the kernels' float type,
+    exact below 2^24 in float32: a float32 run that long goes per step (float64 does not)."""
+    long = {**vk.scenario(N=50, steps=1, every=0).model_dump(mode="json"),
+            "time": {"steps": 2**24, "dt": 1.0}}
+    assert kernels.engine.fused_batch(Scenario.model_validate(long), "cpu") is not None
+    f32_long = Scenario.model_validate({**long, "precision": "float32"})
+    assert kernels.engine.fused_batch(f32_long, "cpu") is None
+    short = Scenario.model_validate({**long, "precision": "float32",
+                                     "time": {"steps": 2**24 - 1, "dt": 1.0}})
+    assert kernels.engine.fused_batch(short, "cpu") is not None

@@ -25,7 +25,7 @@ from schemas import Scenario
 
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
-from ...runtime import DevicePolicy, as_real
+from ...runtime import DevicePolicy, as_real, wide
 from ...space.graph import count_roots, reset_parent
 from ...space.grid import permute, permute_rows
 from ...space.initial import InitialState, initial_state
@@ -254,12 +254,12 @@ class FlockingKernel(ModelKernel):
     def observe(self, step: int) -> dict[str, float]:
         self._sort(step)
         st = self.state
-        pos, vel = st["pos"].to_numpy(), st["vel"].to_numpy()
+        pos, vel = wide(st["pos"]), wide(st["vel"])
         obs = fo.velocity_stats(vel)
         kinetic = 0.5 * float((vel * vel).sum())
         if self.fixed:
             csr_potential(st["pos"], self.indptr, self.indices, self.prm, self.pot)
-            obs["W"] = 0.5 * float(self.pot.to_numpy().sum()) + kinetic  # eq. 5
+            obs["W"] = 0.5 * float(wide(self.pot).sum()) + kinetic  # eq. 5
             obs.update(self.graph_obs)
             self._closest(step, *fo.closest_pair(pos), obs)
         else:
@@ -278,12 +278,12 @@ class FlockingKernel(ModelKernel):
         deg = np.empty(self.n, dtype=np.int64)
         deg[ids] = self.deg.to_numpy()
         n_comp = count_roots(self.parent)
-        reduced = 0.5 * float(self.pot.to_numpy().sum()) + kinetic
+        reduced = 0.5 * float(wide(self.pot).sum()) + kinetic
         obs = {"Q_reduced": reduced, "Q": reduced + self._q_constant(),
                "components": float(n_comp)}
         obs.update(fo.valency_stats(deg, self.p.valency_per_agent_max))
         # The 3x3 cells hold every pair closer than the grid radius: exact below it.
-        d2 = self.near_d2.to_numpy()
+        d2 = wide(self.near_d2)
         k = int(np.argmin(d2))
         if self.all_pairs or d2[k] < self.grid_radius**2:
             j = int(self.near_k.to_numpy()[k])
@@ -293,7 +293,7 @@ class FlockingKernel(ModelKernel):
             self._closest(step, dist, int(ids[a]), int(ids[b]), obs)
         lam = fo.NOT_COMPUTED
         if self.n <= self.p.lambda2_max_agents:
-            radii = st["rad"].to_numpy() if self.per_agent_radius else self.grid_radius
+            radii = wide(st["rad"]) if self.per_agent_radius else self.grid_radius
             rule = "own" if self.flags["rule"] == RADIUS_RULES["own"] else "min"
             u, v = fo.proximity_edges(pos, radii, rule, self.flags["inclusive"])
             lam = fo.algebraic_connectivity(fo.graph_matrix(self.n, u, v), n_comp,

@@ -26,7 +26,7 @@ from schemas.formation import FormationParams, SaturatingF
 
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
-from ...runtime import DevicePolicy, as_real
+from ...runtime import DevicePolicy, as_real, wide
 from ...space.graph import MetricGraph
 from ...space.grid import Grid, make_visitor, permute, permute_rows, within
 from ...space.initial import initial_state
@@ -321,7 +321,7 @@ class FormationKernel(ModelKernel):
                             ti.ndarray(float, shape=(self.n, 3)))
         vel, aux = self.obs_out
         observe(st["pos"], st.ids, *self.b_dev, vel, aux, self.prm, *self.grid.view())
-        return {"pos": st["pos"].to_numpy(), "vel": vel.to_numpy(), "aux": aux.to_numpy(),
+        return {"pos": wide(st["pos"]), "vel": wide(vel), "aux": wide(aux),
                 "ids": st.ids_numpy()}
 
     def observe(self, step: int) -> dict[str, float]:

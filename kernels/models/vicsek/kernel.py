@@ -23,7 +23,7 @@ from schemas import PeriodicBox, Scenario, VicsekParams
 
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
-from ...runtime import DevicePolicy, as_real
+from ...runtime import DevicePolicy, as_real, wide
 from ...space import rng
 from ...space.graph import MetricGraph, count_roots, find, link, reset_parent
 from ...space.grid import Grid, make_visitor, within
@@ -254,12 +254,12 @@ class VicsekKernel(ModelKernel):
     def observe(self, step: int) -> dict[str, float]:
         self.state.sort(self.grid, step)
         st = self.state
-        e = st["ew"].to_numpy()  # unit vectors e(theta_i); column sums: 15x numpy's sum(0)
+        e = wide(st["ew"])  # unit vectors e(theta_i); column sums: 15x numpy's sum(0)
         obs = {"polarization": float(np.hypot(e[:, 0].sum(), e[:, 1].sum()) / self.n)}
         if self.p.rule == "vicsek":
             obs["heading_spread"] = self.circular_spread(st["ew"])
         else:
-            theta = st["theta"].to_numpy()
+            theta = wide(st["theta"])
             obs["heading_spread"] = float(theta.max() - theta.min())
         if self.p.rule == "leader":
             obs["leader_error"] = float(np.abs(theta - self.p.leader_heading).max())
