@@ -48,6 +48,14 @@ def widen() -> float:
 def max_cells_across() -> int:
     """Cells across beyond which a swarm counts as runaway in the running precision."""
     return _MAX_CELLS_ACROSS[runtime.current().precision]
+
+
+def runaway_cause(extent: float) -> str:
+    """The one wording of a runaway swarm, on every path, in the running precision."""
+    limit = max_cells_across().bit_length() - 1
+    tail = "; float32's limit: precision float64 allows 2^30" if limit < 30 else ""
+    return (f"the swarm spans {extent:.3g} length units, over 2^{limit} neighbour radii "
+            f"(agents escaping: dt too large or forces unbounded{tail})")
 PERIODIC_REACH = 1  # cells per radius in the periodic box
 
 
@@ -246,15 +254,8 @@ class Grid:
             extent = max(bb[2] - bb[0], bb[3] - bb[1])
             if not np.isfinite(extent):
                 raise SimulationDiverged(step, "position", "a position became non-finite")
-            limit = max_cells_across()
-            if extent / self.gf[0] > limit:
-                raise SimulationDiverged(
-                    step,
-                    "position",
-                    f"the swarm spans {extent:.3g} length units, over {limit:.3g} neighbour "
-                    "radii (agents escaping: dt too large or forces unbounded; in float32 "
-                    "the limit is 2^14 radii: precision float64 allows 2^30)",
-                )
+            if extent / self.gf[0] > max_cells_across():
+                raise SimulationDiverged(step, "position", runaway_cause(extent))
             self.gf[2], self.gf[3] = bb[0], bb[1]
             self._gf_nd.from_numpy(self.gf)
         _assign(pos, self.key, self.cid, self.count, self._gf_nd, self._gi_nd, self.periodic)

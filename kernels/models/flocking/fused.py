@@ -45,7 +45,7 @@ from ... import runtime
 from ...batch import FusedBatch
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
-from ...space.grid import max_cells_across, widen
+from ...space.grid import max_cells_across, runaway_cause, widen
 from ...space.params import Slots
 from . import observe as fo
 from . import potentials
@@ -1060,9 +1060,7 @@ class FlockingBatch(FusedBatch):
         span = float(self.args["prm"].to_numpy()[b, P.SPAN])
         if not np.isfinite(span):
             return step, "position", "a position became non-finite"
-        return step, "position", (
-            f"the swarm spans {span:.3g} length units, over 2^30 neighbour radii "
-            "(agents escaping: dt too large or forces unbounded)")
+        return step, "position", runaway_cause(span)
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:

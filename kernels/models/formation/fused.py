@@ -38,7 +38,7 @@ from schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePa
 from ... import runtime
 from ...batch import FusedBatch
 from ...space.cells import SPREAD
-from ...space.grid import widen
+from ...space.grid import runaway_cause, widen
 from ...space.initial import initial_state
 from .forces import F_KINDS, G_KINDS
 from .fused_observe import COMMON, F1_OBS, F2_OBS, N_OBS, OBS, observe
@@ -58,14 +58,13 @@ MAX_N = 512  # all pairs up to here: at N = 1000 a fused F2 step cost as much CP
 # per-step one (4.3 vs 4.2 ms, the per-step path on 2 threads), at N = 500 1.3 vs 2.2 ms
 # Why a replica stopped (iprm[IP.CAUSE]), as the per-step path words it: its step check
 # (0, 1), or its grid's check of the positions it buckets (2, 3; kernels/space/grid.py), which
-# runs first at every step and RK4 stage. Cause 3 is formatted with prm[P.EXTENT].
+# runs first at every step and RK4 stage. Cause 3 is `runaway_cause` of prm[P.EXTENT].
 CAUSES = (
     "two agents at the same position, where g is singular (dt too large lets agents jump "
     "onto each other)",
     "non-finite position (dt too large for the repulsion's stiffness at close range)",
     "a position became non-finite",
-    "the swarm spans {:.3g} length units, over 2^30 neighbour radii (agents escaping: dt "
-    "too large or forces unbounded)",
+    "the swarm ran away",  # runaway_cause(extent)
 )
 
 
@@ -351,7 +350,7 @@ class FormationBatch(FusedBatch):
             return None
         cause = CAUSES[iprm[b, IP.CAUSE]]
         if iprm[b, IP.CAUSE] == 3:
-            cause = cause.format(float(self.args["prm"].to_numpy()[b, P.EXTENT]))
+            cause = runaway_cause(float(self.args["prm"].to_numpy()[b, P.EXTENT]))
         return step, "position", cause
 
     @staticmethod

@@ -50,8 +50,9 @@ IP = Slots("STEPS", "EVERY", "TRACK", "NOBS", "BAD", "LINKED", "LONGEST", "OPEN"
 CAUSES = (
     ("heading/position",
      "non-finite input (v0 * dt or the initial state too large for float64)"),
-    ("position", "the swarm spans over 2^30 neighbour radii (agents escaping: dt too large "
-                 "or forces unbounded), or a position became non-finite"),
+    ("position", "the swarm spans over 2^30 neighbour radii (2^14 in float32; agents "
+                 "escaping: dt too large or forces unbounded), or a position became "
+                 "non-finite"),
 )
 # Observable columns, in the order the per-step path reports them.
 OBS = ("step", "polarization", "heading_spread", "leader_error", "components",
