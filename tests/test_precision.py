@@ -243,3 +243,21 @@ def test_long_float32_runs_take_the_per_step_path():
     short = Scenario.model_validate({**long, "precision": "float32",
                                      "time": {"steps": 2**24 - 1, "dt": 1.0}})
     assert kernels.engine.fused_batch(short, "cpu") is not None
+
+
+def test_float32_agent_within_rounding_of_L_keeps_its_neighbours(path):
+    """In float32, x / cell rounds up to the cell count for an x within rounding of L
+    (here x = the float32 below L = 3.13: x / cell = 3.0 = nc). That agent belongs to the
+    last cell; put in cell 0 (x mod nc) it sat across the seam from its neighbours, and
+    a neighbour 0.5 away went unseen."""
+    L = 3.13
+    x = float(np.nextafter(np.float32(L), np.float32(0.0)))
+    sc = Scenario.model_validate({
+        "model": {"kind": "vicsek", "v0": 0.0, "eta": 0.0},
+        "space": {"kind": "periodic", "L": L}, "neighbours": {"radius": 1.0},
+        "initial": {"kind": "explicit", "positions": [[x, 1.5], [x - 0.5, 1.5]],
+                    "headings": [0.0, 1.0]},
+        "time": {"steps": 1}, "precision": "float32"})
+    res = kernels.run(sc)
+    assert res.extra["engine_path"] == path
+    assert res.observables["degree_min"][0] == 1.0, path

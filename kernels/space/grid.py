@@ -85,7 +85,11 @@ def plane_bucket(cx, cy, mask):
 @ti.func
 def periodic_cell(x, y, gf: ti.template(), nc):
     inv = 1.0 / gf[0]
-    return ti.math.ivec2(int(ti.floor(x * inv)) % nc, int(ti.floor(y * inv)) % nc)
+    # x < L, yet x / cell can round up to nc for an x within rounding of L (in float32,
+    # about one agent per step at N = 10^7): that agent is in the last cell, and "% nc"
+    # alone would put it in cell 0, across the seam from its neighbours.
+    return ti.math.ivec2(ti.min(int(ti.floor(x * inv)), nc - 1) % nc,
+                         ti.min(int(ti.floor(y * inv)), nc - 1) % nc)
 
 
 _BBOX_BLOCK = 4096  # agents per block of the bounding-box reduction
