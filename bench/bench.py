@@ -81,10 +81,9 @@ def part_of(record_name: str) -> str:
 def profile_one(label: str, n: int, backend: str, precision: str) -> dict:
     """Runs in a child process started with TI_KERNEL_PROFILER=1: a warm-up, then
     PROFILE_STEPS steps whose kernel times are summed by part, per step."""
+    from flocklab import kernels
+    from flocklab.schemas import Scenario
     from taichi.profiler.kernel_profiler import get_default_kernel_profiler
-
-    import kernels
-    from schemas import Scenario
 
     spec = dict(workloads()[label](n), backend=backend, precision=precision)
     kernels.run(Scenario.model_validate(dict(spec, time=dict(spec["time"], steps=2))))
@@ -105,8 +104,8 @@ def profile_one(label: str, n: int, backend: str, precision: str) -> dict:
 
 def measure_one(label: str, n: int, steps: int, backend: str, precision: str) -> dict:
     """Runs in a child process: warm up, reset the peak RSS, run, report."""
-    import kernels
-    from schemas import Scenario
+    from flocklab import kernels
+    from flocklab.schemas import Scenario
 
     spec = workloads()[label](n)
     spec["backend"] = backend

@@ -8,8 +8,8 @@ cannot reach them: the point is to see which checks hold and by how much the res
 Not collected by default (not a test_ module); never import it from a test.
 """
 
-from kernels import runtime
-from schemas import Scenario
+from flocklab.kernels import runtime
+from flocklab.schemas import Scenario
 
 runtime.ensure.__defaults__ = (None, "float32")
 Scenario.model_fields["precision"].default = "float32"

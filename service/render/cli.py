@@ -86,7 +86,7 @@ def render(args: argparse.Namespace) -> dict[str, object]:
         return {"kind": "sweep", "measures": drawn, "axes": sweep.axes}
     run = RunData(folder)
     if args.movie:
-        from service.cli import ProgressBar
+        from flocklab.service.cli import ProgressBar
 
         from .movie import write_movie
 
