@@ -81,9 +81,10 @@ def part_of(record_name: str) -> str:
 def profile_one(label: str, n: int, backend: str, precision: str) -> dict:
     """Runs in a child process started with TI_KERNEL_PROFILER=1: a warm-up, then
     PROFILE_STEPS steps whose kernel times are summed by part, per step."""
+    from taichi.profiler.kernel_profiler import get_default_kernel_profiler
+
     from flocklab import kernels
     from flocklab.schemas import Scenario
-    from taichi.profiler.kernel_profiler import get_default_kernel_profiler
 
     spec = dict(workloads()[label](n), backend=backend, precision=precision)
     kernels.run(Scenario.model_validate(dict(spec, time=dict(spec["time"], steps=2))))

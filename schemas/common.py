@@ -179,6 +179,16 @@ class Recording(Strict):
         "degree_*, isolated) and the heading spread unless they are named. Supported by "
         "the models that declare their observables (vicsek).",
     )
+    precision: Literal["float64", "float32"] = Field(
+        default="float64", description="Floating-point type of the recorded frames in the "
+        "H5MD file: float32 halves a large trajectory (positions keep about 7 significant "
+        "digits). The run's own arithmetic is the scenario's `precision` (float64 by default).",
+    )
+    compression: Literal["none", "gzip"] = Field(
+        default="none", description="Compress the recorded frames in the H5MD file (gzip "
+        "level 4 with HDF5's shuffle filter, which every HDF5 reader decodes): smaller "
+        "files, slower writes and reads.",
+    )
 
     @property
     def enabled(self) -> bool:

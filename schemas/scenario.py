@@ -54,8 +54,8 @@ class Scenario(Strict):
         "and pair sum is held and computed in this type (float64: what the papers' theorem "
         "checks assume; float32: half the memory traffic, for large N and GPUs). Integers "
         "(steps, counters, ids) and the noise's 32 random bits are the same in both. Not "
-        "the storage type of recorded frames (`recording.precision`, where present, only "
-        "converts what is written).",
+        "the storage type of the recorded frames: `recording.precision` only converts what "
+        "is written.",
     )
 
     @property

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from flocklab import kernels
 from flocklab.kernels import runtime
 from flocklab.kernels.space import rng
 from flocklab.schemas import Scenario
-
 from tests import test_flocking_reference as fr
 from tests import test_formation as fm
 from tests import test_vicsek as vk

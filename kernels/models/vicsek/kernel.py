@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import taichi as ti
+
 from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
 from ...model import ModelKernel, register_kernel
