@@ -175,6 +175,8 @@ def ensure(requested: str, threads: int | None = None, precision: str = "float64
     global _current
     import taichi as ti
 
+    if precision not in ("float64", "float32"):
+        raise ValueError(f"precision {precision!r}: float64 or float32")
     backend = resolve_backend(requested)
     n_threads = threads or default_threads()
     if _current is not None and (_current.backend, _current.threads, _current.precision) == (

@@ -261,3 +261,11 @@ def test_float32_agent_within_rounding_of_L_keeps_its_neighbours(path):
     res = kernels.run(sc)
     assert res.extra["engine_path"] == path
     assert res.observables["degree_min"][0] == 1.0, path
+
+
+def test_an_unknown_precision_is_refused():
+    with pytest.raises(ValueError, match="float64 or float32"):
+        runtime.ensure("cpu", precision="float16")
+    with pytest.raises(ValueError):
+        Scenario.model_validate({**vk.scenario().model_dump(mode="json"),
+                                 "precision": "float16"})
