@@ -13,16 +13,17 @@ every `flocklab.*` module (the `flocklab` command among them), imports nothing h
 """
 
 import importlib
-import importlib.metadata
 from typing import Any
-
-try:
-    __version__ = importlib.metadata.version("flocklab")
-except importlib.metadata.PackageNotFoundError:  # a source tree that was never installed
-    __version__ = "0+unknown"
 
 
 def __getattr__(name: str) -> Any:
+    if name == "__version__":  # read on first use: importlib.metadata costs ~70 ms
+        from importlib import metadata
+
+        try:
+            return metadata.version("flocklab")
+        except metadata.PackageNotFoundError:  # a source tree never installed
+            return "0+unknown"
     clients = importlib.import_module("flocklab.clients")
     if name in clients.__all__:
         return getattr(clients, name)
@@ -30,4 +31,5 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
-    return sorted([*globals(), *importlib.import_module("flocklab.clients").__all__])
+    return sorted([*globals(), "__version__",
+                   *importlib.import_module("flocklab.clients").__all__])

@@ -239,78 +239,54 @@ $("submit-sweep").addEventListener("click", async () => {
   }
 });
 
-// -- the job list -------------------------------------------------------------------------
+// -- the job and sweep lists -------------------------------------------------------------
 
-async function refreshJobs() {
-  try {
-    const page = await api("/v1/jobs?limit=30");
-    state.jobs = page.items;
-    $("list-state").textContent = "";
-  } catch (err) {
-    $("list-state").textContent = err.status === 401 ? "(enter the API key)" : `(${err.message})`;
-    return;
-  }
-  const body = document.querySelector("#jobs tbody");
-  body.replaceChildren(...state.jobs.map((j) => {
-    const tr = document.createElement("tr");
-    tr.dataset.id = j.id;
-    tr.className = j.id === state.selected ? "selected" : "";
-    const cells = [j.id.slice(0, 8), j.model, String(j.n_agents), j.status];
-    for (const [i, text] of cells.entries()) {
-      const td = document.createElement("td");
-      td.textContent = text;
-      if (i === 0) td.className = "mono";
-      if (i === 3) td.className = `status ${j.status}`;
-      tr.append(td);
-    }
+/** One list row: id, label, count, status and a progress bar; a click selects it. */
+function listRow(item, selected, label, count, onSelect) {
+  const tr = document.createElement("tr");
+  tr.dataset.id = item.id;
+  tr.className = item.id === selected ? "selected" : "";
+  for (const [i, text] of [item.id.slice(0, 8), label, count, item.status].entries()) {
     const td = document.createElement("td");
-    const bar = document.createElement("progress");
-    bar.max = 1;
-    bar.value = j.progress;
-    td.append(bar);
+    td.textContent = text;
+    if (i === 0) td.className = "mono";
+    if (i === 3) td.className = `status ${item.status}`;
     tr.append(td);
-    tr.addEventListener("click", () => selectJob(j.id));
-    return tr;
-  }));
+  }
+  const td = document.createElement("td");
+  const bar = document.createElement("progress");
+  bar.max = 1;
+  bar.value = item.progress;
+  td.append(bar);
+  tr.append(td);
+  tr.addEventListener("click", () => onSelect(item.id));
+  return tr;
 }
 
-// -- the sweep list -----------------------------------------------------------------------
+/** Fetch a list route into state[key] and redraw its table (the key's problem shown). */
+async function refreshList(path, key, stateId, tableSel, row) {
+  try {
+    state[key] = (await api(path)).items;
+    $(stateId).textContent = "";
+  } catch (err) {
+    $(stateId).textContent = err.status === 401 ? "(enter the API key)" : `(${err.message})`;
+    return;
+  }
+  document.querySelector(`${tableSel} tbody`).replaceChildren(...state[key].map(row));
+}
+
+function refreshJobs() {
+  return refreshList("/v1/jobs?limit=30", "jobs", "list-state", "#jobs", (j) =>
+    listRow(j, state.selected, j.model, String(j.n_agents), selectJob));
+}
 
 function sweepRuns(sw) {
   return `${sw.runs_done}/${sw.runs_total}` + (sw.runs_failed ? ` (${sw.runs_failed} failed)` : "");
 }
 
-async function refreshSweeps() {
-  try {
-    const page = await api("/v1/sweeps?limit=30");
-    state.sweeps = page.items;
-    $("sweep-list-state").textContent = "";
-  } catch (err) {
-    $("sweep-list-state").textContent = err.status === 401 ? "(enter the API key)" : `(${err.message})`;
-    return;
-  }
-  const body = document.querySelector("#sweeps tbody");
-  body.replaceChildren(...state.sweeps.map((sw) => {
-    const tr = document.createElement("tr");
-    tr.dataset.id = sw.id;
-    tr.className = sw.id === state.selectedSweep ? "selected" : "";
-    const cells = [sw.id.slice(0, 8), sw.name || sw.model, sweepRuns(sw), sw.status];
-    for (const [i, text] of cells.entries()) {
-      const td = document.createElement("td");
-      td.textContent = text;
-      if (i === 0) td.className = "mono";
-      if (i === 3) td.className = `status ${sw.status}`;
-      tr.append(td);
-    }
-    const td = document.createElement("td");
-    const bar = document.createElement("progress");
-    bar.max = 1;
-    bar.value = sw.progress;
-    td.append(bar);
-    tr.append(td);
-    tr.addEventListener("click", () => selectSweep(sw.id));
-    return tr;
-  }));
+function refreshSweeps() {
+  return refreshList("/v1/sweeps?limit=30", "sweeps", "sweep-list-state", "#sweeps", (sw) =>
+    listRow(sw, state.selectedSweep, sw.name || sw.model, sweepRuns(sw), selectSweep));
 }
 
 function refreshLists() {
