@@ -2,6 +2,7 @@
 
     python -m bench.bench                      # every workload at N = 1e4, 1e5, 1e6
     python -m bench.bench --sizes 1000000 --models vicsek --no-baseline
+    python -m bench.bench --sizes 10000000 --models vicsek --precision float32
 
 Each measurement runs in its own process: a warm-up run compiles the kernels, the peak
 resident memory is reset (/proc/self/clear_refs), then the timed run. `peak_bytes_per_agent`
@@ -9,21 +10,46 @@ is the growth of the peak RSS over the warmed-up process, divided by N (no frame
 recorded). `agent_steps_per_second` counts the stepping loop, observables included, and
 excludes setup (state allocation and upload), reported as `setup_seconds`.
 For Vicsek, the same run also times the numpy + scipy cKDTree version a Python user would
-write (`baseline`), and the ratio.
+write (`baseline`), and the ratio. `precision` (--precision) is the scenario's.
+
+`seconds_per_step` splits a step: a separate profiling process (Taichi's kernel profiler,
+TI_KERNEL_PROFILER=1, which syncs after every launch and so must not time the main run)
+runs `PROFILE_STEPS` steps of the same workload and sums each kernel's time into `grid`
+(the neighbour grid's build and the state's permutation into it), `interaction` (the
+step kernels: neighbour visits, forces, integration), `observables` (graph, spread and
+observation kernels), `transfers` (host <-> device copies) and `host` (the rest of the
+wall time: Python, launches, host-side observables). On the small-N path one launch does
+all of a window's work: its time is `fused`. --no-profile skips the pass.
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
 import contextlib
 import importlib
 import json
+import os
 import pkgutil
+import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import bench
+
+PROFILE_STEPS = 20  # two observation intervals of every workload
+# Kernel (Python function) names by the part of a step they belong to; "interaction" is
+# every other kernel, "transfers" Taichi's own copy kernels.
+PARTS = {
+    "grid": {"_bbox_blocks", "_assign", "_scan", "_scatter_serial", "_scatter_parallel",
+             "permute_rows", "permute", "_scan_scatter", "max_count", "bucket_aggregates"},
+    "observables": {"_arc_buckets", "_largest_gap", "reset_parent", "count_roots", "graph",
+                    "root_labels", "observe", "velocity"},
+    "transfers": {"ndarray_to_ext_arr", "ext_arr_to_ndarray"},
+    "fused": {"advance"},
+}
 
 
 def workloads() -> dict:
@@ -46,13 +72,45 @@ def _peak_rss() -> int:
     return 0
 
 
-def measure_one(label: str, n: int, steps: int, backend: str) -> dict:
+def part_of(record_name: str) -> str:
+    """The step part of a kernel profiler record ("step_c106_0_kernel_1_range_for")."""
+    name = re.sub(r"_c\d+_\d+_kernel_\d+_\w+$", "", record_name)
+    return next((part for part, names in PARTS.items() if name in names), "interaction")
+
+
+def profile_one(label: str, n: int, backend: str, precision: str) -> dict:
+    """Runs in a child process started with TI_KERNEL_PROFILER=1: a warm-up, then
+    PROFILE_STEPS steps whose kernel times are summed by part, per step."""
+    from taichi.profiler.kernel_profiler import get_default_kernel_profiler
+
+    from flocklab import kernels
+    from flocklab.schemas import Scenario
+
+    spec = dict(workloads()[label](n), backend=backend, precision=precision)
+    kernels.run(Scenario.model_validate(dict(spec, time=dict(spec["time"], steps=2))))
+    prof = get_default_kernel_profiler()
+    prof.clear_info()
+    spec["time"] = dict(spec["time"], steps=PROFILE_STEPS)
+    t0 = time.perf_counter()
+    result = kernels.run(Scenario.model_validate(spec))
+    wall = time.perf_counter() - t0 - result.extra.get("setup_seconds", 0.0)
+    prof._update_records()  # the records themselves: the public API only prints them
+    parts: dict[str, float] = collections.Counter()
+    for rec in prof._traced_records:
+        parts[part_of(rec.name)] += rec.kernel_time / 1e3
+    parts["host"] = max(0.0, wall - sum(parts.values()))
+    steps = max(result.steps, 1)
+    return {k: round(v / steps, 7) for k, v in sorted(parts.items())}
+
+
+def measure_one(label: str, n: int, steps: int, backend: str, precision: str) -> dict:
     """Runs in a child process: warm up, reset the peak RSS, run, report."""
     from flocklab import kernels
     from flocklab.schemas import Scenario
 
     spec = workloads()[label](n)
     spec["backend"] = backend
+    spec["precision"] = precision
     warm = dict(spec, time=dict(spec["time"], steps=2))
     kernels.run(Scenario.model_validate(warm))
     with contextlib.suppress(OSError):  # not Linux: the peak then includes the warm-up
@@ -66,7 +124,7 @@ def measure_one(label: str, n: int, steps: int, backend: str) -> dict:
     model, _, rule = label.partition("/")
     return {
         "model": model, "rule": rule or None, "N": n, "steps": result.steps,
-        "backend": result.backend, "status": result.status,
+        "backend": result.backend, "precision": precision, "status": result.status,
         "seconds": round(loop, 4), "setup_seconds": round(result.extra.get("setup_seconds", 0), 4),
         "agent_steps_per_second": round(n * result.steps / loop),
         "peak_bytes_per_agent": round((peak - base) / n, 1),
@@ -79,13 +137,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--models", nargs="+", help="workload labels or model prefixes")
     ap.add_argument("--steps", type=int, help="steps per run (default: ~3e7 agent-steps)")
     ap.add_argument("--backend", default="cpu")
+    ap.add_argument("--precision", choices=["float64", "float32"], default="float64",
+                    help="the scenarios' precision (default float64)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the cKDTree baseline")
+    ap.add_argument("--no-profile", action="store_true",
+                    help="skip the profiling pass (seconds_per_step)")
     ap.add_argument("--one", nargs=2, metavar=("LABEL", "N"), help=argparse.SUPPRESS)
+    ap.add_argument("--profile-one", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.one:
         n = int(args.one[1])
-        print(json.dumps(measure_one(args.one[0], n, args.steps or default_steps(n),
-                                     args.backend)))
+        if args.profile_one:
+            print(json.dumps(profile_one(args.one[0], n, args.backend, args.precision)))
+        else:
+            print(json.dumps(measure_one(args.one[0], n, args.steps or default_steps(n),
+                                         args.backend, args.precision)))
         return 0
     labels = [lb for lb in workloads()
               if not args.models or any(lb.startswith(m) for m in args.models)]
@@ -93,12 +159,20 @@ def main(argv: list[str] | None = None) -> int:
         for n in args.sizes:
             steps = args.steps or default_steps(n)
             cmd = [sys.executable, "-m", "bench.bench", "--one", label, str(n),
-                   "--steps", str(steps), "--backend", args.backend]
+                   "--steps", str(steps), "--backend", args.backend,
+                   "--precision", args.precision]
             out = subprocess.run(cmd, capture_output=True, text=True)
             if out.returncode != 0:
-                print(json.dumps({"model": label, "N": n, "error": out.stderr[-2000:]}))
+                print(json.dumps({"model": label, "N": n, "precision": args.precision,
+                                  "error": out.stderr[-2000:]}))
                 continue
             line = json.loads(out.stdout.strip().splitlines()[-1])
+            if not args.no_profile:
+                prof = subprocess.run([*cmd, "--profile-one"], capture_output=True, text=True,
+                                      env={**os.environ, "TI_KERNEL_PROFILER": "1"})
+                line["seconds_per_step"] = (
+                    json.loads(prof.stdout.strip().splitlines()[-1]) if prof.returncode == 0
+                    else {"error": prof.stderr[-500:]})
             if label == "vicsek/vicsek" and not args.no_baseline:
                 from bench.ckdtree_vicsek import run as ckdtree_run
 

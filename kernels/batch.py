@@ -140,7 +140,9 @@ def run_batch(
     wall = time.perf_counter() - t0
     results = []
     for b, sc in enumerate(scenarios):
-        obs = batch.observables(b, status)
+        # float64 like the per-step path's series, whatever the kernels' precision.
+        obs = {k: np.asarray(v, dtype=np.float64) for k, v in
+               batch.observables(b, status).items()}
         obs = {"step": obs["step"], "time": obs["step"] * sc.time.dt,
                **{k: v for k, v in obs.items() if k != "step"}}
         div = batch.divergence(b, status)

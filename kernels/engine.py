@@ -37,7 +37,7 @@ def run(
     frames every `recording.every` steps and at the end. A blow-up returns status
     "diverged" with the step and likely cause; what was recorded before it is kept.
     """
-    rt = runtime.ensure(scenario.backend, scenario.threads)
+    rt = runtime.ensure(scenario.backend, scenario.threads, scenario.precision)
     make = fused_batch(scenario, rt.backend)
     if make is not None:
         return batch.run_batch(make, [scenario], backend=rt.backend, sinks=[sink],
@@ -124,16 +124,28 @@ ResultFn = Callable[[int, RunResult], None]
 FUSED_MAX_N = 10_000
 # Replicas per fused launch: enough to fill the cores, few enough to poll for a stop.
 BATCH_AGENTS = 400_000
+# The fused path writes each observation's step number into a row of the kernels' float
+# type: exact below 2^24 in float32, so longer float32 runs take the per-step path.
+FUSED_MAX_STEPS_FLOAT32 = 2**24
+
+
+def _fused_key(scenario: Scenario):
+    """The fused batch key of `scenario` (None: the per-step path), backend aside."""
+    cls = kernel_for(scenario.model.kind).batch
+    if cls is None or scenario.n_agents > FUSED_MAX_N or (
+            scenario.precision == "float32"
+            and scenario.time.steps >= FUSED_MAX_STEPS_FLOAT32):
+        return None
+    return cls.batch_key(scenario)
 
 
 def fused_batch(scenario: Scenario, backend: str) -> Callable | None:
     """The fused small-N batch class for `scenario`, or None for the per-step path. Decided
     from the scenario (and the backend that runs it) alone, so a run's bits never depend
     on the company it keeps."""
-    cls = kernel_for(scenario.model.kind).batch
-    if cls is None or backend != "cpu" or scenario.n_agents > FUSED_MAX_N:
+    if backend != "cpu" or _fused_key(scenario) is None:
         return None
-    return cls if cls.batch_key(scenario) is not None else None
+    return kernel_for(scenario.model.kind).batch
 
 
 def run_batch(
@@ -154,7 +166,7 @@ def run_batch(
         if should_stop is not None and should_stop():
             break
         first = scenarios[group[0]]
-        rt = runtime.ensure(first.backend, first.threads)
+        rt = runtime.ensure(first.backend, first.threads, first.precision)
         make = fused_batch(first, rt.backend)
         if make is None:
             done = [run(first, should_stop=should_stop)]
@@ -169,17 +181,16 @@ def run_batch(
 
 
 def _batches(scenarios: Sequence[Scenario]) -> list[list[int]]:
-    """Indices grouped into launches: same backend, threads and fused batch key, at most
-    BATCH_AGENTS agents each; a per-step scenario is a group of its own."""
+    """Indices grouped into launches: same backend, threads, precision and fused batch key,
+    at most BATCH_AGENTS agents each; a per-step scenario is a group of its own."""
     groups: dict[tuple, list[list[int]]] = {}
     out: list[list[int]] = []
     for i, sc in enumerate(scenarios):
-        cls = kernel_for(sc.model.kind).batch
-        key = None if cls is None or sc.n_agents > FUSED_MAX_N else cls.batch_key(sc)
+        key = _fused_key(sc)
         if key is None:
             out.append([i])
             continue
-        lanes = groups.setdefault((sc.backend, sc.threads, key), [[]])
+        lanes = groups.setdefault((sc.backend, sc.threads, sc.precision, key), [[]])
         if lanes[-1] and sum(scenarios[j].n_agents for j in lanes[-1]) + sc.n_agents > (
                 BATCH_AGENTS):
             lanes.append([])

@@ -23,6 +23,8 @@ import sys
 import threading
 from dataclasses import dataclass
 
+import numpy as np
+
 from .result import BackendUnavailable
 
 _GPU_ORDER = ("cuda", "vulkan")
@@ -52,6 +54,12 @@ class Runtime:
     backend: str  # what actually runs: "cpu", "cuda" or "vulkan"
     threads: int | None
     thread_id: int
+    precision: str = "float64"  # Taichi's default_fp: "float64" or "float32"
+
+    @property
+    def real(self) -> type[np.floating]:
+        """The numpy twin of the kernels' float type (`float` in a kernel is default_fp)."""
+        return np.float32 if self.precision == "float32" else np.float64
 
     @property
     def policy(self) -> DevicePolicy:
@@ -133,17 +141,46 @@ def current() -> Runtime:
     return _current
 
 
-def ensure(requested: str, threads: int | None = None) -> Runtime:
+def real() -> type[np.floating]:
+    """The numpy float type of the running kernels (np.float32 or np.float64)."""
+    return current().real
+
+
+def as_real(a) -> np.ndarray:
+    """`a` as a contiguous array of the kernels' float type, rounded once on the host (a
+    float64 array handed to a float32 ndarray would be narrowed by a Taichi kernel)."""
+    return np.ascontiguousarray(a, dtype=real())
+
+
+def wide(a) -> np.ndarray:
+    """A device array on the host in float64 (no copy when it is float64 already): the
+    host-side observables sum over N agents, which float32 would accumulate with an error
+    growing with N (numpy sums a column of an (N, 2) array serially)."""
+    return a.to_numpy().astype(np.float64, copy=False)
+
+
+def next_above(x: float) -> float:
+    """The next float above `x` in the kernels' precision: `d2 <= x` is `d2 < next_above(x)`
+    in that type (a float64 nextafter would round back to x in float32)."""
+    t = real()
+    return float(np.nextafter(t(x), t(np.inf)))
+
+
+def ensure(requested: str, threads: int | None = None, precision: str = "float64") -> Runtime:
     """Initialise Taichi for `requested` in this process (idempotent for the same choice).
 
-    Switching backend or thread count re-initialises Taichi (`ti.reset` + `ti.init`).
+    Switching backend, thread count or precision re-initialises Taichi (`ti.reset` +
+    `ti.init`); every kernel then compiles again for the new default float type.
     """
     global _current
     import taichi as ti
 
+    if precision not in ("float64", "float32"):
+        raise ValueError(f"precision {precision!r}: float64 or float32")
     backend = resolve_backend(requested)
     n_threads = threads or default_threads()
-    if _current is not None and _current.backend == backend and _current.threads == n_threads:
+    if _current is not None and (_current.backend, _current.threads, _current.precision) == (
+            backend, n_threads, precision):
         if _current.thread_id != threading.get_ident():
             raise RuntimeError("Taichi kernels must run on the thread that called ti.init")
         return _current
@@ -152,7 +189,7 @@ def ensure(requested: str, threads: int | None = None) -> Runtime:
     arch = getattr(ti, backend)
     kwargs: dict = {
         "arch": arch,
-        "default_fp": ti.f64,
+        "default_fp": ti.f32 if precision == "float32" else ti.f64,
         "default_ip": ti.i32,
         "offline_cache": True,
         "log_level": ti.WARN,
@@ -175,5 +212,5 @@ def ensure(requested: str, threads: int | None = None) -> Runtime:
     if _ARCH_NAMES.get(ran, ran) != backend:
         ti.reset()
         raise BackendUnavailable(f"backend {backend!r} requested but Taichi started {ran!r}")
-    _current = Runtime(backend, n_threads, threading.get_ident())
+    _current = Runtime(backend, n_threads, threading.get_ident(), precision)
     return _current

@@ -182,7 +182,7 @@ class Recording(Strict):
     precision: Literal["float64", "float32"] = Field(
         default="float64", description="Floating-point type of the recorded frames in the "
         "H5MD file: float32 halves a large trajectory (positions keep about 7 significant "
-        "digits); the run itself is always float64.",
+        "digits). The run's own arithmetic is the scenario's `precision` (float64 by default).",
     )
     compression: Literal["none", "gzip"] = Field(
         default="none", description="Compress the recorded frames in the H5MD file (gzip "
@@ -196,6 +196,8 @@ class Recording(Strict):
 
 
 Backend = Literal["cpu", "cuda", "vulkan", "auto"]
+# The engine's floating-point type (the scenario's `precision`, not the frames' dtype).
+Precision = Literal["float64", "float32"]
 
 
 class Convergence(Strict):

@@ -14,6 +14,7 @@ from .common import (
     Initial,
     Neighbours,
     PeriodicBox,
+    Precision,
     Recording,
     Space,
     TimeSpec,
@@ -46,6 +47,15 @@ class Scenario(Strict):
     )
     threads: StrictInt | None = Field(
         default=None, ge=1, le=1024, description="CPU threads (default: all allowed cores)."
+    )
+    precision: Precision = Field(
+        default="float64",
+        description="The engine's arithmetic: every position, velocity, heading, parameter "
+        "and pair sum is held and computed in this type (float64: what the papers' theorem "
+        "checks assume; float32: half the memory traffic, for large N and GPUs). Integers "
+        "(steps, counters, ids) and the noise's 32 random bits are the same in both. Not "
+        "the storage type of the recorded frames: `recording.precision` only converts what "
+        "is written.",
     )
 
     @property

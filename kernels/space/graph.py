@@ -10,6 +10,7 @@ from functools import cache
 import numpy as np
 import taichi as ti
 
+from ..runtime import as_real
 from .grid import Grid, make_visitor, within
 
 nd = ti.types.ndarray()
@@ -122,8 +123,8 @@ class MetricGraph:
     def __init__(self, n: int, radius: float, inclusive: bool, periodic: bool):
         self.kernel = metric_graph_kernel(inclusive, periodic, False)
         self.kernel_by_id = metric_graph_kernel(inclusive, periodic, True)
-        self.r2 = ti.ndarray(ti.f64, shape=1)
-        self.r2.from_numpy(np.array([radius * radius]))
+        self.r2 = ti.ndarray(float, shape=1)
+        self.r2.from_numpy(as_real([radius * radius]))
         self.parent = ti.ndarray(ti.i32, shape=n)
         self.deg = ti.ndarray(ti.i32, shape=n)
 

@@ -16,8 +16,11 @@ d = r_k - r_i. `pair` applies the distance test itself (models differ: < or <=, 
 radii). On the plane, hash collisions are filtered by comparing exact cell ids, so no
 agent is ever visited twice. No bucket has a fixed capacity: nothing can overflow.
 
-Cells are a hair wider than the radius (factor 1 + 1e-9), so rounding in floor() can never
-place two agents within the radius two cells apart.
+Cells are a hair wider than the radius (`widen()`), so rounding in floor() can never
+place two agents within the radius two cells apart. The rounding of a cell coordinate is
+relative to the cells across, so the hair depends on the precision: 1e-9 in float64 (up to
+2^30 cells across), 2^-7 in float32, where 1 + 1e-9 is 1 and a cell coordinate carries
+about 3 n 2^-24 of error at n cells across (both agents: under 2^-7 up to 2^14 across).
 """
 
 import math
@@ -25,13 +28,34 @@ import math
 import numpy as np
 import taichi as ti
 
+from .. import runtime
 from ..result import SimulationDiverged
 from ..runtime import DevicePolicy
 
 nd = ti.types.ndarray()
-WIDEN = 1.0 + 1e-9  # cells a hair wider than the radius (see above)
+# Cells a hair wider than the radius, per precision (see above).
+_WIDEN = {"float64": 1.0 + 1e-9, "float32": 1.0 + 2.0**-7}
 # Beyond this many cells across, i32 cell coordinates (and float precision) run out.
-MAX_CELLS_ACROSS = 2**30
+_MAX_CELLS_ACROSS = {"float64": 2**30, "float32": 2**14}
+
+
+def widen() -> float:
+    """The factor cells are wider than the radius in the running precision (called at
+    kernel compile time too: a kernel compiled for float32 gets the float32 hair)."""
+    return _WIDEN[runtime.current().precision]
+
+
+def max_cells_across() -> int:
+    """Cells across beyond which a swarm counts as runaway in the running precision."""
+    return _MAX_CELLS_ACROSS[runtime.current().precision]
+
+
+def runaway_cause(extent: float) -> str:
+    """The one wording of a runaway swarm, on every path, in the running precision."""
+    limit = max_cells_across().bit_length() - 1
+    tail = "; float32's limit: precision float64 allows 2^30" if limit < 30 else ""
+    return (f"the swarm spans {extent:.3g} length units, over 2^{limit} neighbour radii "
+            f"(agents escaping: dt too large or forces unbounded{tail})")
 PERIODIC_REACH = 1  # cells per radius in the periodic box
 
 
@@ -61,7 +85,11 @@ def plane_bucket(cx, cy, mask):
 @ti.func
 def periodic_cell(x, y, gf: ti.template(), nc):
     inv = 1.0 / gf[0]
-    return ti.math.ivec2(int(ti.floor(x * inv)) % nc, int(ti.floor(y * inv)) % nc)
+    # x < L, yet x / cell can round up to nc for an x within rounding of L (in float32,
+    # about one agent per step at N = 10^7): that agent is in the last cell, and "% nc"
+    # alone would put it in cell 0, across the seam from its neighbours.
+    return ti.math.ivec2(ti.min(int(ti.floor(x * inv)), nc - 1) % nc,
+                         ti.min(int(ti.floor(y * inv)), nc - 1) % nc)
 
 
 _BBOX_BLOCK = 4096  # agents per block of the bounding-box reduction
@@ -87,7 +115,7 @@ def _bbox_blocks(pos: nd, part: nd):
 def bbox_buffer(n: int) -> ti.Ndarray:
     """Scratch for `bounding_box` of N agents (owned by a grid: Taichi arrays must not
     outlive the runtime that made them)."""
-    return ti.ndarray(ti.f64, shape=(-(-n // _BBOX_BLOCK), 4))
+    return ti.ndarray(float, shape=(-(-n // _BBOX_BLOCK), 4))
 
 
 def bounding_box(pos: ti.Ndarray, part: ti.Ndarray) -> np.ndarray:
@@ -192,7 +220,7 @@ class Grid:
         # about 30 % fewer candidates than r-cells with a 3x3 stencil. The plane's hashed
         # buckets are not contiguous, so there fewer, larger cells win.
         self.reach = PERIODIC_REACH if self.periodic else 1
-        cell = self.radius * WIDEN / self.reach
+        cell = self.radius * widen() / self.reach
         if self.periodic:
             L = float(periodic_L)
             # Cap the cell count near 4 per agent: a sparse box then gets wider cells
@@ -206,9 +234,9 @@ class Grid:
             self.nc = 0
             n_buckets = _next_pow2(2 * n)
         self.n_buckets = n_buckets
-        self.gf = np.array([cell, L, 0.0, 0.0], dtype=np.float64)
+        self.gf = np.array([cell, L, 0.0, 0.0], dtype=runtime.real())
         self.gi = np.array([self.nc, n_buckets - 1], dtype=np.int32)
-        self._gf_nd = ti.ndarray(ti.f64, shape=4)
+        self._gf_nd = ti.ndarray(float, shape=4)
         self._gi_nd = ti.ndarray(ti.i32, shape=2)
         self._gi_nd.from_numpy(self.gi)
         self._gf_nd.from_numpy(self.gf)
@@ -230,13 +258,8 @@ class Grid:
             extent = max(bb[2] - bb[0], bb[3] - bb[1])
             if not np.isfinite(extent):
                 raise SimulationDiverged(step, "position", "a position became non-finite")
-            if extent / self.gf[0] > MAX_CELLS_ACROSS:
-                raise SimulationDiverged(
-                    step,
-                    "position",
-                    f"the swarm spans {extent:.3g} length units, over 2^30 neighbour radii "
-                    "(agents escaping: dt too large or forces unbounded)",
-                )
+            if extent / self.gf[0] > max_cells_across():
+                raise SimulationDiverged(step, "position", runaway_cause(extent))
             self.gf[2], self.gf[3] = bb[0], bb[1]
             self._gf_nd.from_numpy(self.gf)
         _assign(pos, self.key, self.cid, self.count, self._gf_nd, self._gi_nd, self.periodic)

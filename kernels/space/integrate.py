@@ -30,7 +30,7 @@ def rk4_begin(y0: nd, ys: nd, yk: nd):
 
 
 @ti.kernel
-def rk4_stage(y0: nd, ys: nd, k: nd, yk: nd, w: ti.f64, c: ti.f64):
+def rk4_stage(y0: nd, ys: nd, k: nd, yk: nd, w: float, c: float):
     """yk += w k; ys <- y0 + c k."""
     for i in range(y0.shape[0]):
         for m in range(y0.shape[1]):
@@ -39,7 +39,7 @@ def rk4_stage(y0: nd, ys: nd, k: nd, yk: nd, w: ti.f64, c: ti.f64):
 
 
 @ti.kernel
-def rk4_finish(y0: nd, k: nd, yk: nd, h6: ti.f64, y_out: nd):
+def rk4_finish(y0: nd, k: nd, yk: nd, h6: float, y_out: nd):
     """y1 = y0 + h/6 (k1 + 2 k2 + 2 k3 + k4), with k4 = k."""
     for i in range(y0.shape[0]):
         for m in range(y0.shape[1]):

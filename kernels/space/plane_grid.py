@@ -18,9 +18,10 @@ import math
 import numpy as np
 import taichi as ti
 
+from .. import runtime
 from ..result import SimulationDiverged
 from ..runtime import DevicePolicy
-from .grid import MAX_CELLS_ACROSS, WIDEN, Grid, bbox_buffer, bounding_box
+from .grid import Grid, bbox_buffer, bounding_box, max_cells_across, widen
 
 nd = ti.types.ndarray()
 CELLS_PER_AGENT = 4
@@ -67,13 +68,13 @@ class DenseGrid:
     def __init__(self, n: int, radius: float):
         self.n = n
         self.radius = float(radius)
-        self.cell = self.radius * WIDEN
+        self.cell = self.radius * widen()
         self.max_cells = CELLS_PER_AGENT * n + 16
         self.key = ti.ndarray(ti.i32, shape=n)
         self.perm = ti.ndarray(ti.i32, shape=n)
         self.count = ti.ndarray(ti.i32, shape=self.max_cells)
         self.start = ti.ndarray(ti.i32, shape=self.max_cells + 1)
-        self.gf = ti.ndarray(ti.f64, shape=3)
+        self.gf = ti.ndarray(float, shape=3)
         self.gi = ti.ndarray(ti.i32, shape=2)
         self._bb_part = bbox_buffer(n)
 
@@ -84,7 +85,7 @@ class DenseGrid:
         extent = max(x1 - x0, y1 - y0)
         if not math.isfinite(extent):
             raise SimulationDiverged(step, "position", "a position became non-finite")
-        if extent / self.cell > MAX_CELLS_ACROSS:
+        if extent / self.cell > max_cells_across():
             return False  # the engine's grid reports the runaway swarm
         # One spare column and row: floor() in the kernel may round up where int() here
         # rounds down, and no cell index may reach past the grid.
@@ -92,7 +93,7 @@ class DenseGrid:
         ny = int((y1 - y0) / self.cell) + 2
         if nx * ny > self.max_cells:
             return False
-        self.gf.from_numpy(np.array([self.cell, x0, y0]))
+        self.gf.from_numpy(runtime.as_real([self.cell, x0, y0]))
         self.gi.from_numpy(np.array([nx, ny], dtype=np.int32))
         _assign(pos, self.key, self.count, self.gf, self.gi)
         _scan_scatter(self.key, self.count, self.start, self.perm, nx * ny)

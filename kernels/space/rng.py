@@ -4,10 +4,15 @@ Noise must not depend on thread scheduling or on the order agents are stored in,
 generator state is shared: every draw is a pure function of its coordinates. The hash is
 the `lowbias32` integer finaliser (Chris Wellons), applied in a chain. The numpy twin
 produces the same bits, so a brute-force reference can replay a noisy run exactly.
+
+The hash is 32 bits in both precisions. float64 holds all 32 as u = h 2^-32; float32 keeps
+the top 24 (u = (h >> 8) 2^-24), since h 2^-32 rounded to float32 could reach 1.0.
 """
 
 import numpy as np
 import taichi as ti
+
+from .. import runtime
 
 _M32 = 0xFFFFFFFF
 _C1 = 0x7FEB352D
@@ -41,9 +46,15 @@ def _mix(x):
 
 @ti.func
 def uniform(key, agent):
-    """Uniform in [0, 1) with 32 random bits, from a step key and an agent id."""
+    """Uniform in [0, 1) with 32 random bits (24 in float32), from a step key and an
+    agent id."""
     h = _mix(_mix(ti.cast(agent, ti.u32) ^ key) + ti.u32(0x9E3779B9))
-    return ti.cast(h, ti.f64) * (1.0 / 4294967296.0)
+    u = 0.0
+    if ti.static(runtime.current().precision == "float32"):
+        u = ti.cast(h >> ti.u32(8), float) * (1.0 / 16777216.0)
+    else:
+        u = ti.cast(h, float) * (1.0 / 4294967296.0)
+    return u
 
 
 def _mix_np(x: np.ndarray) -> np.ndarray:
@@ -56,9 +67,11 @@ def _mix_np(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def uniform_np(key: int, agents: np.ndarray) -> np.ndarray:
-    """numpy twin of `uniform` (same bits)."""
+def uniform_np(key: int, agents: np.ndarray, precision: str = "float64") -> np.ndarray:
+    """numpy twin of `uniform` (same bits, in `precision`'s type)."""
     h = _mix_np(_mix_np(agents.astype(np.uint32) ^ np.uint32(key)) + np.uint32(0x9E3779B9))
+    if precision == "float32":
+        return (h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0)
     return h.astype(np.float64) * (1.0 / 4294967296.0)
 
 

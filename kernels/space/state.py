@@ -9,20 +9,22 @@ most once per step: a step and the observation of the same state share one sort.
 import numpy as np
 import taichi as ti
 
+from ..runtime import as_real
 from .grid import Grid, permute, permute_rows
 
 
 class SortedState:
-    """Named (N,) or (N, C) float64 arrays plus `ids`, permuted together."""
+    """Named (N,) or (N, C) arrays of the runtime's float type plus `ids`, permuted
+    together."""
 
     def __init__(self, arrays: dict[str, np.ndarray]):
         self.n = len(next(iter(arrays.values())))
         self.cur: dict[str, ti.Ndarray] = {}
         self._buf: dict[str, ti.Ndarray] = {}
         for name, a in arrays.items():
-            self.cur[name] = ti.ndarray(ti.f64, shape=a.shape)
-            self.cur[name].from_numpy(np.ascontiguousarray(a, dtype=np.float64))
-            self._buf[name] = ti.ndarray(ti.f64, shape=a.shape)
+            self.cur[name] = ti.ndarray(float, shape=a.shape)
+            self.cur[name].from_numpy(as_real(a))
+            self._buf[name] = ti.ndarray(float, shape=a.shape)
         self.ids = ti.ndarray(ti.i32, shape=self.n)
         self.ids.from_numpy(np.arange(self.n, dtype=np.int32))
         self._ids_buf = ti.ndarray(ti.i32, shape=self.n)

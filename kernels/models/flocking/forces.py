@@ -94,7 +94,7 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
         s2 = d.dot(d)
         r2 = pair_radius2(rule, i, k, rad, prm)
         other = k != i
-        w = ti.cast(within(s2, r2, inclusive) & other, ti.f64)  # j in N_i
+        w = ti.cast(within(s2, r2, inclusive) & other, float)  # j in N_i
         # U_ij = V(s) below R, constant (no force) from R on; select drops f(0) = inf.
         f = ti.select((s2 < r2) & other, potentials.force_factor(s2, prm[P.A]), 0.0)
         return acc + ti.math.vec3(w * vel[k, 0] + f * d[0], w * vel[k, 1] + f * d[1], w)
@@ -209,7 +209,13 @@ def root_labels(parent: nd, labels: nd):
         labels[i] = find(parent, i)
 
 
-Observation = ti.types.vector(6, ti.f64)
+
+
+@ti.func
+def Observation(a, b, c, d, e, f):
+    """Six floats of the runtime's type (a module-level ti.types.vector would fix it at
+    import)."""
+    return ti.Vector([a, b, c, d, e, f], dt=float)
 O_DEG, O_NEAR_D2, O_NEAR_K, O_VSUM, O_NSAT, O_ROOT = range(6)
 
 
@@ -227,7 +233,7 @@ def grid_observe_kernel(rule: int, inclusive: bool, search: str):
             s2 = d.dot(d)
             if s2 < acc[O_NEAR_D2]:
                 acc[O_NEAR_D2] = s2
-                acc[O_NEAR_K] = ti.cast(k, ti.f64)
+                acc[O_NEAR_K] = ti.cast(k, float)
             r2 = pair_radius2(rule, i, k, rad, prm)
             if within(s2, r2, inclusive):
                 acc[O_DEG] += 1.0
@@ -236,7 +242,7 @@ def grid_observe_kernel(rule: int, inclusive: bool, search: str):
                     root = ti.cast(acc[O_ROOT], ti.i32)
                     rk = find(parent, k)
                     if rk != root:
-                        acc[O_ROOT] = ti.cast(link(parent, root, rk), ti.f64)
+                        acc[O_ROOT] = ti.cast(link(parent, root, rk), float)
             if s2 < r2:
                 acc[O_VSUM] += potentials.value(s2, prm[P.A], prm[P.C])
                 if ti.static(rule == MIN):  # R_ij varies with j
@@ -253,7 +259,7 @@ def grid_observe_kernel(rule: int, inclusive: bool, search: str):
         for i in range(pos.shape[0]):
             xi = ti.math.vec2(pos[i, 0], pos[i, 1])
             acc = Observation(0.0, NEAREST_NONE, -1.0, 0.0, 0.0,
-                              ti.cast(find(parent, i), ti.f64))
+                              ti.cast(find(parent, i), float))
             acc = visit(i, xi, acc, pos, ti.static((start, cid, gf, gi)),
                         ti.static((rad, prm, parent)), False)
             deg[i] = ti.cast(acc[O_DEG], ti.i32)

@@ -41,10 +41,11 @@ import taichi as ti
 
 from flocklab.schemas import Scenario
 
+from ... import runtime
 from ...batch import FusedBatch
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
-from ...space.grid import MAX_CELLS_ACROSS, WIDEN
+from ...space.grid import max_cells_across, runaway_cause, widen
 from ...space.params import Slots
 from . import observe as fo
 from . import potentials
@@ -77,8 +78,19 @@ COL = {name: k for k, name in enumerate(OBS)}
 N_OBS = len(OBS)
 VELOCITY_KEYS = OBS[1:9]
 MISSION_KEYS = OBS[18:]
-Grid = ti.types.vector(6, ti.f64)  # (cells across, cells down, width, x0, y0, extent)
-Acc5 = ti.types.vector(5, ti.f64)
+
+
+# Vectors of the runtime's float type: built at compile time (`float` is Taichi's
+# default_fp then), where a module-level ti.types.vector would fix the type at import.
+@ti.func
+def Grid(nx, ny, w, x0, y0, extent):
+    """(cells across, cells down, width, x0, y0, extent)."""
+    return ti.Vector([nx, ny, w, x0, y0, extent], dt=float)
+
+
+@ti.func
+def Acc5(a, b, c, d, e):
+    return ti.Vector([a, b, c, d, e], dt=float)
 
 
 @ti.func
@@ -127,7 +139,7 @@ def build_cells(a0, n, c0, cap, w0, src: ti.template(), may_hash: ti.template(),
     ny = 0
     hashed = 0
     span = ti.max(ext[0], ext[1])
-    if not (span < MAX_CELLS_ACROSS * w):  # NaN included
+    if not (span < ti.static(max_cells_across()) * w):  # NaN included
         nx = -1
     if nx == 0:
         if (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
@@ -357,7 +369,7 @@ def advance_kernel(mode: int):
         s2 = d.dot(d)
         r2 = pair_radius2(k, q, ps)
         other = ti.cast(m != k, ti.i32)
-        w = ti.cast(_within(s2, r2, ti.cast(q[1], ti.i32)) & other, ti.f64)
+        w = ti.cast(_within(s2, r2, ti.cast(q[1], ti.i32)) & other, float)
         f = ti.select((ti.cast(s2 < r2, ti.i32) & other) != 0,
                       potentials.force_factor(s2, q[2]), 0.0)
         return acc + ti.math.vec3(w * ps[m, 2] + f * d[0], w * ps[m, 3] + f * d[1], w)
@@ -376,7 +388,7 @@ def advance_kernel(mode: int):
             s2 = d.dot(d)
             if s2 < acc[1]:
                 acc[1] = s2
-                acc[2] = ti.cast(m, ti.f64)
+                acc[2] = ti.cast(m, float)
             r2 = pair_radius2(k, q, ps)
             if _within(s2, r2, ti.cast(q[1], ti.i32)):
                 acc[0] += 1.0
@@ -415,7 +427,7 @@ def advance_kernel(mode: int):
         for i in range(a0, a0 + n):
             lo = ti.min(lo, ti.math.vec2(ps[i, 0], ps[i, 1]))
             hi = ti.max(hi, ti.math.vec2(ps[i, 0], ps[i, 1]))
-        w = ti.max(hi[0] - lo[0], hi[1] - lo[1]) / ti.sqrt(ti.cast(n, ti.f64))
+        w = ti.max(hi[0] - lo[0], hi[1] - lo[1]) / ti.sqrt(ti.cast(n, float))
         if not (w > 0.0):
             w = 1.0
         best = ti.math.vec3(NEAREST_NONE, a0, a0)
@@ -504,7 +516,7 @@ def advance_kernel(mode: int):
         pot = 0.0
         best = ti.math.vec3(NEAREST_NONE, a0, a0)
         for k in range(a0, a0 + n):
-            acc = Acc5(0.0, NEAREST_NONE, ti.cast(k, ti.f64), 0.0, 0.0)
+            acc = Acc5(0.0, NEAREST_NONE, ti.cast(k, float), 0.0, 0.0)
             acc = visit_observe(k, a0, n, c0, nx, ny, acc, q, ps, cell, cstart, cidx,
                                 ti.static((parent,)))
             deg = acc[0]
@@ -566,7 +578,7 @@ def advance_kernel(mode: int):
             obs[row, COL["q_constant"]] = 0.5 * (n - 1) * qc
             obs[row, COL["destination_distance_mean"]] = dmean / n
             obs[row, COL["destination_distance_max"]] = dfar
-            obs[row, COL["inside_vmin_fraction"]] = ti.cast(inside, ti.f64) / n
+            obs[row, COL["inside_vmin_fraction"]] = ti.cast(inside, float) / n
             obs[row, COL["mission_potential_max"]] = mmax
             obs[row, COL["obstacle_distance_min"]] = omin
             obs[row, COL["radius_min"]] = rmin
@@ -629,8 +641,8 @@ def advance_kernel(mode: int):
                     oy = 0.0
                     if ti.static(not fixed):
                         if iprm[b, IP.CELLS]:
-                            g = build_cells(a0, n, c0, cap, prm[b, P.R] * WIDEN, pos, True,
-                                            cell, cstart, cidx)
+                            w0 = prm[b, P.R] * ti.static(widen())
+                            g = build_cells(a0, n, c0, cap, w0, pos, True, cell, cstart, cidx)
                             if g[0] < 0:
                                 iprm[b, IP.BAD] = s
                                 iprm[b, IP.CAUSE] = 1
@@ -758,7 +770,7 @@ def _obstacle_grid(p) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, flo
                    cap=cap)
         return centers, radii, np.zeros(2, dtype=np.int64), geo
     lo, hi = centers.min(axis=0), centers.max(axis=0)
-    w = cap * WIDEN
+    w = cap * widen()
     while (np.floor((hi - lo) / w) + 1).prod() > 4 * m + 16:
         w *= 2.0
     nx, ny = (int(k) for k in np.floor((hi - lo) / w) + 1)
@@ -904,13 +916,13 @@ class FlockingBatch(FusedBatch):
         self.chunk = max(1, (self.K - 2) * min(everies)) if everies else None
         self.lam = [np.zeros(r) for r in rows]
 
-        def arr(a: np.ndarray, dtype=ti.f64) -> ti.Ndarray:
-            a = np.ascontiguousarray(a)
+        def arr(a: np.ndarray, dtype=float) -> ti.Ndarray:
+            a = runtime.as_real(a) if dtype is float else np.ascontiguousarray(a)
             out = ti.ndarray(dtype, shape=a.shape)
             out.from_numpy(a)
             return out
 
-        def scratch(shape, dtype=ti.f64) -> ti.Ndarray:
+        def scratch(shape, dtype=float) -> ti.Ndarray:
             return ti.ndarray(dtype, shape=shape)
 
         i32 = ti.i32
@@ -1048,9 +1060,7 @@ class FlockingBatch(FusedBatch):
         span = float(self.args["prm"].to_numpy()[b, P.SPAN])
         if not np.isfinite(span):
             return step, "position", "a position became non-finite"
-        return step, "position", (
-            f"the swarm spans {span:.3g} length units, over 2^30 neighbour radii "
-            "(agents escaping: dt too large or forces unbounded)")
+        return step, "position", runaway_cause(span)
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:

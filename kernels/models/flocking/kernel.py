@@ -25,7 +25,7 @@ from flocklab.schemas import Scenario
 
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
-from ...runtime import DevicePolicy
+from ...runtime import DevicePolicy, as_real, wide
 from ...space.graph import count_roots, reset_parent
 from ...space.grid import permute, permute_rows
 from ...space.initial import InitialState, initial_state
@@ -60,8 +60,8 @@ DIVERGED_CAUSE = (
 )
 
 
-def _f64(*shape: int) -> ti.Ndarray:
-    return ti.ndarray(ti.f64, shape=shape)
+def _real(*shape: int) -> ti.Ndarray:
+    return ti.ndarray(float, shape=shape)
 
 
 def _i32(*shape: int) -> ti.Ndarray:
@@ -82,17 +82,17 @@ class FlockingKernel(ModelKernel):
         self.a, self.c = p.potential.coefficients()
         self.fixed = self._fixed_topology()
         self.state = SortedState(self._initial_arrays(initial_state(scenario)))
-        self.prm = _f64(P.size)
-        self.prm.from_numpy(self._parameters())
+        self.prm = _real(P.size)
+        self.prm.from_numpy(as_real(self._parameters()))
         self.bad = _i32(1)
-        self.pot = _f64(n)
+        self.pot = _real(n)
         self.closest: dict[str, Any] = {}
         if self.fixed:
             self._init_graph(scenario)
         else:
             self._init_grid(scenario)
         if p.integrator == "rk4":
-            self.rk4 = {k: _f64(n, 2) for k in ("xs", "vs", "a", "xk", "vk")}
+            self.rk4 = {k: _real(n, 2) for k in ("xs", "vs", "a", "xk", "vk")}
         else:
             self.rk4 = None
 
@@ -116,7 +116,7 @@ class FlockingKernel(ModelKernel):
     def _init_navigation(self) -> None:
         """No mission potential: empty obstacle grid and parameters (never read)."""
         self.obstacles = ObstacleGrid(np.zeros((0, 2)), np.zeros(0), 1.0, self.policy)
-        self.nav = _f64(NAV.size)
+        self.nav = _real(NAV.size)
 
     def _before_motion(self, step: int) -> None:
         """Runs after sorting, before the step's motion (M3: the adaptive radius)."""
@@ -161,10 +161,10 @@ class FlockingKernel(ModelKernel):
         rk4_grid = self.p.integrator == "rk4" and not self.all_pairs
         self.stage_grid = PlaneGrid(n, r, self.policy) if rk4_grid else None
         self.per_agent_radius = flags["rule"] != RADIUS_RULES["uniform"]
-        self._no_rad = _f64(1)
+        self._no_rad = _real(1)
         self.parent, self.labels = _i32(n), _i32(n)
         self.deg, self.near_k = _i32(n), _i32(n)
-        self.near_d2 = _f64(n)
+        self.near_d2 = _real(n)
         self.stage = None
 
     # --- stepping -----------------------------------------------------------------------
@@ -236,8 +236,8 @@ class FlockingKernel(ModelKernel):
             return
         if self.stage is None:
             n = self.n
-            self.stage = {"pos": _f64(n, 2), "vel": _f64(n, 2), "a": _f64(n, 2),
-                          "rad": _f64(n) if self.per_agent_radius else self._no_rad}
+            self.stage = {"pos": _real(n, 2), "vel": _real(n, 2), "a": _real(n, 2),
+                          "rad": _real(n) if self.per_agent_radius else self._no_rad}
         s, g = self.stage, self.stage_grid
         g.build(pos, step)
         permute_rows(pos, s["pos"], g.perm)
@@ -254,12 +254,12 @@ class FlockingKernel(ModelKernel):
     def observe(self, step: int) -> dict[str, float]:
         self._sort(step)
         st = self.state
-        pos, vel = st["pos"].to_numpy(), st["vel"].to_numpy()
+        pos, vel = wide(st["pos"]), wide(st["vel"])
         obs = fo.velocity_stats(vel)
         kinetic = 0.5 * float((vel * vel).sum())
         if self.fixed:
             csr_potential(st["pos"], self.indptr, self.indices, self.prm, self.pot)
-            obs["W"] = 0.5 * float(self.pot.to_numpy().sum()) + kinetic  # eq. 5
+            obs["W"] = 0.5 * float(wide(self.pot).sum()) + kinetic  # eq. 5
             obs.update(self.graph_obs)
             self._closest(step, *fo.closest_pair(pos), obs)
         else:
@@ -278,12 +278,12 @@ class FlockingKernel(ModelKernel):
         deg = np.empty(self.n, dtype=np.int64)
         deg[ids] = self.deg.to_numpy()
         n_comp = count_roots(self.parent)
-        reduced = 0.5 * float(self.pot.to_numpy().sum()) + kinetic
+        reduced = 0.5 * float(wide(self.pot).sum()) + kinetic
         obs = {"Q_reduced": reduced, "Q": reduced + self._q_constant(),
                "components": float(n_comp)}
         obs.update(fo.valency_stats(deg, self.p.valency_per_agent_max))
         # The 3x3 cells hold every pair closer than the grid radius: exact below it.
-        d2 = self.near_d2.to_numpy()
+        d2 = wide(self.near_d2)
         k = int(np.argmin(d2))
         if self.all_pairs or d2[k] < self.grid_radius**2:
             j = int(self.near_k.to_numpy()[k])
@@ -293,7 +293,7 @@ class FlockingKernel(ModelKernel):
             self._closest(step, dist, int(ids[a]), int(ids[b]), obs)
         lam = fo.NOT_COMPUTED
         if self.n <= self.p.lambda2_max_agents:
-            radii = st["rad"].to_numpy() if self.per_agent_radius else self.grid_radius
+            radii = wide(st["rad"]) if self.per_agent_radius else self.grid_radius
             rule = "own" if self.flags["rule"] == RADIUS_RULES["own"] else "min"
             u, v = fo.proximity_edges(pos, radii, rule, self.flags["inclusive"])
             lam = fo.algebraic_connectivity(fo.graph_matrix(self.n, u, v), n_comp,

@@ -23,7 +23,7 @@ from functools import cache
 import numpy as np
 import taichi as ti
 
-from ...runtime import DevicePolicy
+from ...runtime import DevicePolicy, as_real
 from ...space.grid import Grid, make_visitor
 from ...space.params import Slots
 
@@ -51,17 +51,17 @@ class ObstacleGrid:
         cell = obstacle_range + (float(radii.max()) if m else 0.0)
         self.cell = cell
         self.grid = Grid(max(m, 1), cell, None, policy)
-        pos = ti.ndarray(ti.f64, shape=(max(m, 1), 2))
-        rad = ti.ndarray(ti.f64, shape=max(m, 1))
+        pos = ti.ndarray(float, shape=(max(m, 1), 2))
+        rad = ti.ndarray(float, shape=max(m, 1))
         if m:
             c = np.ascontiguousarray(centers, dtype=np.float64)
-            pos.from_numpy(c)
+            pos.from_numpy(as_real(c))
             self.grid.build(pos)
             perm = self.grid.perm.to_numpy()
             sc, sr = np.empty_like(c), np.empty(m)
             sc[perm], sr[perm] = c, radii
-            pos.from_numpy(sc)
-            rad.from_numpy(sr)
+            pos.from_numpy(as_real(sc))
+            rad.from_numpy(as_real(sr))
             lo, hi = c.min(axis=0) - cell, c.max(axis=0) + cell
             self.bbox = (lo[0], lo[1], hi[0], hi[1])
         else:

@@ -20,11 +20,11 @@ import numpy as np
 from flocklab.schemas import Scenario
 
 from ...model import register_kernel
-from ...runtime import DevicePolicy
+from ...runtime import DevicePolicy, as_real, wide
 from ...space.initial import InitialState
 from . import observe as fo
 from .forces import DAMPING, RADIUS_RULES, P, radius_kernel
-from .kernel import FlockingKernel, _f64, _i32
+from .kernel import FlockingKernel, _i32, _real
 from .navigation import NAV, ObstacleGrid, nav_eval_kernel, nav_parameters
 
 
@@ -36,7 +36,7 @@ class ObstacleFlockingKernel(FlockingKernel):
         super().__init__(scenario, policy)
         p = self.p
         self.nav_k = nav_eval_kernel(self.flags["has_obstacles"], self.flags["unit_kappa"])
-        self.mission = _f64(self.n, 4)  # (V_i, grad V_i, min boundary distance)
+        self.mission = _real(self.n, 4)  # (V_i, grad V_i, min boundary distance)
         self.counts = _i32(2)
         self.counts.fill(0)
         self.adaptive = p.adaptive_radius
@@ -67,9 +67,9 @@ class ObstacleFlockingKernel(FlockingKernel):
                            dtype=np.float64).reshape(-1, 2)
         radii = np.array([0.0] * len(p.obstacles) + [d.radius for d in p.discs])
         self.obstacles = ObstacleGrid(centers, radii, p.obstacle_range, self.policy)
-        self.nav = _f64(NAV.size)
-        self.nav.from_numpy(nav_parameters(p.destination, p.obstacle_range, p.kappa,
-                                           self.obstacles.bbox))
+        self.nav = _real(NAV.size)
+        self.nav.from_numpy(as_real(nav_parameters(p.destination, p.obstacle_range, p.kappa,
+                                                   self.obstacles.bbox)))
 
     def _evaluate_mission(self) -> None:
         """mission[i] = (V_i, grad V_i, min boundary distance) at the current positions."""
@@ -91,7 +91,7 @@ class ObstacleFlockingKernel(FlockingKernel):
         """1/2 sum_i sum_{j != i} V(R_ij), the saturated value of every U_ij (eq. 5):
         R_ij = R_i (own), or min(R_i, R_j), where the k-th smallest radius is the smaller
         one of its pairs with the N - 1 - k larger ones."""
-        rad = self.state["rad"].to_numpy()
+        rad = wide(self.state["rad"])
         v = self.a / rad**2 + np.log(rad**2) + self.c
         if self.p.radius_rule == "own":
             return 0.5 * (self.n - 1) * float(v.sum())
@@ -102,11 +102,11 @@ class ObstacleFlockingKernel(FlockingKernel):
         obs = super().observe(step)
         st = self.state
         self._evaluate_mission()
-        m = self.mission.to_numpy()
+        m = wide(self.mission)
         mission_sum = float(m[:, 0].sum())
         obs["Q_reduced"] += mission_sum  # eq. 5: + sum_i V_i
         obs["Q"] += mission_sum
-        pos, vel, rad = st["pos"].to_numpy(), st["vel"].to_numpy(), st["rad"].to_numpy()
+        pos, vel, rad = wide(st["pos"]), wide(st["vel"]), wide(st["rad"])
         dist = np.hypot(pos[:, 0] - self.p.destination[0], pos[:, 1] - self.p.destination[1])
         cap = self.obstacles.cell
         obs.update({

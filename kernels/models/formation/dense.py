@@ -104,7 +104,7 @@ def coarse_euler(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: bool)
                         own = agg[bucket, 2] > 0.5 and agg_cid[bucket] == want
                         far = ti.abs(a) > 1 or ti.abs(b) > 1
                         if far and own and hi - lo >= _MONOPOLE_MIN:
-                            n_c = ti.cast(hi - lo, ti.f64)
+                            n_c = ti.cast(hi - lo, float)
                             dv = ti.math.vec2(agg[bucket, 0], agg[bucket, 1]) / n_c - xi
                             d2 = dv.dot(dv)
                             if d2 < r2 and d2 > 0.0:

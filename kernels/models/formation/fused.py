@@ -35,9 +35,10 @@ import taichi as ti
 from flocklab.schemas import Scenario
 from flocklab.schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
 
+from ... import runtime
 from ...batch import FusedBatch
 from ...space.cells import SPREAD
-from ...space.grid import WIDEN
+from ...space.grid import runaway_cause, widen
 from ...space.initial import initial_state
 from .forces import F_KINDS, G_KINDS
 from .fused_observe import COMMON, F1_OBS, F2_OBS, N_OBS, OBS, observe
@@ -57,14 +58,13 @@ MAX_N = 512  # all pairs up to here: at N = 1000 a fused F2 step cost as much CP
 # per-step one (4.3 vs 4.2 ms, the per-step path on 2 threads), at N = 500 1.3 vs 2.2 ms
 # Why a replica stopped (iprm[IP.CAUSE]), as the per-step path words it: its step check
 # (0, 1), or its grid's check of the positions it buckets (2, 3; kernels/space/grid.py), which
-# runs first at every step and RK4 stage. Cause 3 is formatted with prm[P.EXTENT].
+# runs first at every step and RK4 stage. Cause 3 is `runaway_cause` of prm[P.EXTENT].
 CAUSES = (
     "two agents at the same position, where g is singular (dt too large lets agents jump "
     "onto each other)",
     "non-finite position (dt too large for the repulsion's stiffness at close range)",
     "a position became non-finite",
-    "the swarm spans {:.3g} length units, over 2^30 neighbour radii (agents escaping: dt "
-    "too large or forces unbounded)",
+    "the swarm ran away",  # runaway_cause(extent)
 )
 
 
@@ -220,12 +220,12 @@ class FormationBatch(FusedBatch):
             straight = (np.zeros(2), np.zeros(2), 0.0, np.zeros(2)) if spline else (
                 path.start, path.q, path.arrival_time, path.end)
             prm[b, :] = [
-                np.nextafter(d * d, np.inf) if sc.inclusive else d * d, d, d * d,
+                runtime.next_above(d * d) if sc.inclusive else d * d, d, d * d,
                 p.repulsion.k_g, f.c if isinstance(f, QuadraticF) else f.k,
                 f.v_max if isinstance(f, SaturatingF) else 0.0, dt, dt / self.per,
                 *straight[0], *straight[1], straight[2], *straight[3],
                 p.collision_distance or d / 100.0, p.leader_tolerance or d / 100.0,
-                -1.0 if p.lag_sign == "eq8" else 1.0, d * WIDEN, 0.0]
+                -1.0 if p.lag_sign == "eq8" else 1.0, d * widen(), 0.0]
             iprm[b, :] = [sc.time.steps, sc.recording.observables_every, -1, 0, 0,
                           F_KINDS[f.kind], G_KINDS[p.repulsion.kind], int(f1), int(spline),
                           len(chg), len(p.schedule), len(inforce), len(forms)]
@@ -238,8 +238,8 @@ class FormationBatch(FusedBatch):
                 forms.extend(row for k in sched.stored for row in k)
         self.steps = iprm[:, IP.STEPS].copy()
 
-        def arr(a, shape, dtype=ti.f64) -> ti.Ndarray:
-            a = np.asarray(a, dtype=np.float64 if dtype == ti.f64 else np.int32)
+        def arr(a, shape, dtype=float) -> ti.Ndarray:
+            a = np.asarray(a, dtype=runtime.real() if dtype is float else np.int32)
             out = ti.ndarray(dtype, shape=shape if not a.size else a.shape)
             if a.size:
                 out.from_numpy(a)
@@ -250,15 +250,15 @@ class FormationBatch(FusedBatch):
             aoff=arr(self.aoff, None, i32), ooff=arr(self.ooff, None, i32),
             prm=arr(prm, None), iprm=arr(iprm, None, i32), chg=arr(chg, (1, 4)),
             inforce=arr(inforce, (1, 5)), forms=arr(forms, (1, 2)),
-            lead0=ti.ndarray(ti.f64, shape=(B, 1, 4)), pos=arr(pos, None),
-            ps=ti.ndarray(ti.f64, shape=(total, 2)),
-            kk=ti.ndarray(ti.f64, shape=(total, 8) if self.per == 2 else (1, 8)),
-            y=ti.ndarray(ti.f64, shape=(total, 2) if self.per == 2 else (1, 2)),
+            lead0=ti.ndarray(float, shape=(B, 1, 4)), pos=arr(pos, None),
+            ps=ti.ndarray(float, shape=(total, 2)),
+            kk=ti.ndarray(float, shape=(total, 8) if self.per == 2 else (1, 8)),
+            y=ti.ndarray(float, shape=(total, 2) if self.per == 2 else (1, 2)),
             deg=ti.ndarray(i32, shape=total), parent=ti.ndarray(i32, shape=total),
-            ang=ti.ndarray(ti.f64, shape=total), gmax=ti.ndarray(ti.f64, shape=total),
+            ang=ti.ndarray(float, shape=total), gmax=ti.ndarray(float, shape=total),
             gcnt=ti.ndarray(i32, shape=total),
             obs=arr(np.zeros((int(self.ooff[-1]), N_OBS)), None),
-            vel=ti.ndarray(ti.f64, shape=(total, 2)),
+            vel=ti.ndarray(float, shape=(total, 2)),
         )
         self.splines = [b for b, sc in enumerate(scenarios)
                         if isinstance(sc.model.path, SplinePath)]
@@ -291,8 +291,8 @@ class FormationBatch(FusedBatch):
         Taichi ndarray costs more than the copy)."""
         held = self.args.get(name)
         if held is None or held.shape != a.shape:
-            held = self.args[name] = ti.ndarray(ti.f64, shape=a.shape)
-        held.from_numpy(a)
+            held = self.args[name] = ti.ndarray(float, shape=a.shape)
+        held.from_numpy(runtime.as_real(a))
         return held
 
     def advance(self, s0: int, s1: int) -> None:
@@ -350,7 +350,7 @@ class FormationBatch(FusedBatch):
             return None
         cause = CAUSES[iprm[b, IP.CAUSE]]
         if iprm[b, IP.CAUSE] == 3:
-            cause = cause.format(float(self.args["prm"].to_numpy()[b, P.EXTENT]))
+            cause = runaway_cause(float(self.args["prm"].to_numpy()[b, P.EXTENT]))
         return step, "position", cause
 
     @staticmethod

@@ -132,7 +132,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
     obs[row, 10] = serr
     obs[row, 11] = vmis
     obs[row, 12] = ti.sqrt(near)
-    obs[row, 13] = ti.cast(dsum, ti.f64) / n
+    obs[row, 13] = ti.cast(dsum, float) / n
     if f1:
         obs[row, 14] = esum / n
         obs[row, 15] = emax
@@ -140,7 +140,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
         obs[row, 17] = fsum + 0.5 * gsum
     else:
         obs[row, 18] = fsum + 0.5 * gsum
-        obs[row, 19] = ti.cast(ti.sqrt(near) >= prm[b, P.COLLIDE], ti.f64)  # D1
+        obs[row, 19] = ti.cast(ti.sqrt(near) >= prm[b, P.COLLIDE], float)  # D1
         if lead_d > tol:
             lead_k = -1
         iso = 0
@@ -150,7 +150,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
                 iso += 1
             if find_serial(parent, i) == i:
                 comps += 1
-        obs[row, 20] = ti.cast(iso == 0, ti.f64)  # D2
+        obs[row, 20] = ti.cast(iso == 0, float)  # D2
         obs[row, 22] = iso
         obs[row, 23] = comps
         # D3 (props.d3_holds): per component, the counter-clockwise gaps between

@@ -5,7 +5,7 @@ check."""
 
 import taichi as ti
 
-from ...space.grid import MAX_CELLS_ACROSS
+from ...space.grid import max_cells_across
 from ...space.params import Slots
 from .forces import F_KINDS, G_KINDS
 
@@ -206,7 +206,7 @@ def runaway(b, a0, n, src: ti.template(), prm: ti.template(), iprm: ti.template(
     cause = -1
     if bad != 0:
         cause = 2
-    elif extent / prm[b, P.CELL] > MAX_CELLS_ACROSS:
+    elif extent / prm[b, P.CELL] > ti.static(max_cells_across()):
         cause = 3
         prm[b, P.EXTENT] = extent
     if cause >= 0:

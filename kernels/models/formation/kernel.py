@@ -26,7 +26,7 @@ from flocklab.schemas.formation import FormationParams, SaturatingF
 
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
-from ...runtime import DevicePolicy
+from ...runtime import DevicePolicy, as_real, wide
 from ...space.graph import MetricGraph
 from ...space.grid import Grid, make_visitor, permute, permute_rows, within
 from ...space.initial import initial_state
@@ -175,9 +175,9 @@ class FormationKernel(ModelKernel):
         self.grid = Grid(n, d, None, policy)
         self.graph: MetricGraph | None = None
         self.prm_host = force_params(p, d, dt)
-        self.prm = ti.ndarray(ti.f64, shape=self.prm_host.shape)
+        self.prm = ti.ndarray(float, shape=self.prm_host.shape)
         rows = n if self.f1 else 1
-        self.b_dev = [ti.ndarray(ti.f64, shape=(rows, 2)) for _ in range(2)]
+        self.b_dev = [ti.ndarray(float, shape=(rows, 2)) for _ in range(2)]
         self.b_held: list[int | None] = [None, None]
         self.bad = ti.ndarray(ti.i32, shape=2)
         self.fkind = F_KINDS[p.attraction.kind]
@@ -185,11 +185,11 @@ class FormationKernel(ModelKernel):
         self.inclusive = scenario.inclusive
         if p.integrator == "rk4":
             self.grid2 = Grid(n, d, None, policy)
-            self.tmp_pos = ti.ndarray(ti.f64, shape=(n, 2))
-            self.tmp_vel = ti.ndarray(ti.f64, shape=(n, 2))
+            self.tmp_pos = ti.ndarray(float, shape=(n, 2))
+            self.tmp_vel = ti.ndarray(float, shape=(n, 2))
             self.tmp_ids = ti.ndarray(ti.i32, shape=n)
             # RK4's stage state, rates and weighted sum of the rates (kernels/space/integrate.py)
-            self.rk4 = {k: ti.ndarray(ti.f64, shape=(n, 2)) for k in ("ys", "k", "yk")}
+            self.rk4 = {k: ti.ndarray(float, shape=(n, 2)) for k in ("ys", "k", "yk")}
         self.obs_out: tuple | None = None
         self.cap = p.max_exact_candidates if p.integrator == "euler" else None
         self.fine: tuple[int, Grid] | None = None  # the dense regime's grid, by reach m
@@ -208,7 +208,7 @@ class FormationKernel(ModelKernel):
         for k in used:
             if k not in self.b_held:
                 free = next(j for j in range(2) if self.b_held[j] not in used)
-                self.b_dev[free].from_numpy(self.schedule.stored[k])
+                self.b_dev[free].from_numpy(as_real(self.schedule.stored[k]))
                 self.b_held[free] = k
         for s, (t, w) in enumerate(zip(times, weights, strict=True)):
             o = P.LEAD + LEAD.size * s
@@ -216,7 +216,7 @@ class FormationKernel(ModelKernel):
             mats = [w.get(self.b_held[j], np.zeros((2, 2))) for j in range(2)]
             self.prm_host[o + LEAD.A00: o + LEAD.A11 + 1] = mats[0].ravel()
             self.prm_host[o + LEAD.B00: o + LEAD.B11 + 1] = mats[1].ravel()
-        self.prm.from_numpy(self.prm_host)
+        self.prm.from_numpy(as_real(self.prm_host))
         return any(self.b_held[1] in w for w in weights)
 
     def _kernels(self, blend: bool):
@@ -254,7 +254,7 @@ class FormationKernel(ModelKernel):
         self.state.resort(fine)
         self.state.forget_sort()
         if self.agg is None:
-            self.agg = (ti.ndarray(ti.f64, shape=(fine.n_buckets, 3)),
+            self.agg = (ti.ndarray(float, shape=(fine.n_buckets, 3)),
                         ti.ndarray(ti.i64, shape=fine.n_buckets))
         start, cid, _, _ = fine.view()
         bucket_aggregates(self.state["pos"], start, cid, *self.agg)
@@ -317,11 +317,11 @@ class FormationKernel(ModelKernel):
         blend = self._load_times([step * self.dt])
         _, _, observe = self._kernels(blend)
         if self.obs_out is None:
-            self.obs_out = (ti.ndarray(ti.f64, shape=(self.n, 2)),
-                            ti.ndarray(ti.f64, shape=(self.n, 3)))
+            self.obs_out = (ti.ndarray(float, shape=(self.n, 2)),
+                            ti.ndarray(float, shape=(self.n, 3)))
         vel, aux = self.obs_out
         observe(st["pos"], st.ids, *self.b_dev, vel, aux, self.prm, *self.grid.view())
-        return {"pos": st["pos"].to_numpy(), "vel": vel.to_numpy(), "aux": aux.to_numpy(),
+        return {"pos": wide(st["pos"]), "vel": wide(vel), "aux": wide(aux),
                 "ids": st.ids_numpy()}
 
     def observe(self, step: int) -> dict[str, float]:

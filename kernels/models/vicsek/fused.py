@@ -29,11 +29,12 @@ import taichi as ti
 
 from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
+from ... import runtime
 from ...batch import FusedBatch
 from ...space import rng
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import union_serial
-from ...space.grid import MAX_CELLS_ACROSS, WIDEN
+from ...space.grid import max_cells_across, widen
 from ...space.params import Slots
 
 nd = ti.types.ndarray()
@@ -49,8 +50,9 @@ IP = Slots("STEPS", "EVERY", "TRACK", "NOBS", "BAD", "LINKED", "LONGEST", "OPEN"
 CAUSES = (
     ("heading/position",
      "non-finite input (v0 * dt or the initial state too large for float64)"),
-    ("position", "the swarm spans over 2^30 neighbour radii (agents escaping: dt too large "
-                 "or forces unbounded), or a position became non-finite"),
+    ("position", "the swarm spans over 2^30 neighbour radii (2^14 in float32; agents "
+                 "escaping: dt too large or forces unbounded), or a position became "
+                 "non-finite"),
 )
 # Observable columns, in the order the per-step path reports them.
 OBS = ("step", "polarization", "heading_spread", "leader_error", "components",
@@ -102,7 +104,7 @@ def advance_kernel(rule: int, periodic: bool):
         nx = 0: no grid, visit all pairs."""
         nx = 0
         ny = 0
-        w = r * WIDEN
+        w = r * ti.static(widen())
         ox = 0.0
         oy = 0.0
         if ti.static(periodic):
@@ -120,7 +122,7 @@ def advance_kernel(rule: int, periodic: bool):
                 lo = ti.min(lo, p)
                 hi = ti.max(hi, p)
             ext = hi - lo
-            if not (ti.max(ext[0], ext[1]) < MAX_CELLS_ACROSS * w):  # NaN included
+            if not (ti.max(ext[0], ext[1]) < ti.static(max_cells_across()) * w):  # NaN included
                 nx = -1  # runaway (checked at every N): the caller stops the replica
             elif n > ALL_PAIRS_N:
                 # Widen the cells until the grid fits the replica's cell budget (a swarm
@@ -157,7 +159,7 @@ def advance_kernel(rule: int, periodic: bool):
         array access reload its base and shape)."""
         # r2 is the strict threshold: r^2 itself for "<", the next double above it for
         # "<=" (no double lies between), so one compiled test serves both.
-        w = ti.cast(d.dot(d) < r2, ti.f64)  # branch-free: 1 or 0
+        w = ti.cast(d.dot(d) < r2, float)  # branch-free: 1 or 0
         if ti.static(links):
             if w > 0.0 and m > k:  # each edge once
                 if graph:
@@ -314,7 +316,7 @@ def advance_kernel(rule: int, periodic: bool):
             if deg[k] == 0:
                 iso += 1
         obs[row, 4] = roots
-        obs[row, 5] = ti.cast(dsum, ti.f64) / n
+        obs[row, 5] = ti.cast(dsum, float) / n
         obs[row, 6] = dmin
         obs[row, 7] = dmax
         obs[row, 8] = iso
@@ -485,7 +487,7 @@ class VicsekBatch(FusedBatch):
             p: VicsekParams = sc.model  # type: ignore[assignment]
             r = sc.neighbours.radius
             L_ = sc.space.L if self.periodic else 0.0
-            r2 = np.nextafter(r * r, np.inf) if sc.inclusive else r * r
+            r2 = runtime.next_above(r * r) if sc.inclusive else r * r
             prm[b, [P.R2, P.V0DT, P.ETA, P.G, P.L, P.THETA0, P.RADIUS]] = [
                 r2, p.v0 * sc.time.dt, p.eta, p.g or 1.0, L_, p.leader_heading, r]
             track = p.track_linked_intervals
@@ -507,12 +509,13 @@ class VicsekBatch(FusedBatch):
             theta[a0:a1] = th
         ew = np.stack([np.cos(theta), np.sin(theta)], axis=1)
 
-        def arr(a: np.ndarray, dtype=ti.f64) -> ti.Ndarray:
+        def arr(a: np.ndarray, dtype=float) -> ti.Ndarray:
+            a = runtime.as_real(a) if dtype is float else a
             out = ti.ndarray(dtype, shape=a.shape)
             out.from_numpy(a)
             return out
 
-        def scratch(shape, dtype=ti.f64) -> ti.Ndarray:
+        def scratch(shape, dtype=float) -> ti.Ndarray:
             return ti.ndarray(dtype, shape=shape)
 
         i32 = ti.i32

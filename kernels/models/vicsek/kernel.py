@@ -23,7 +23,7 @@ from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
-from ...runtime import DevicePolicy
+from ...runtime import DevicePolicy, as_real, wide
 from ...space import rng
 from ...space.graph import MetricGraph, count_roots, find, link, reset_parent
 from ...space.grid import Grid, make_visitor, within
@@ -57,7 +57,7 @@ def _arc_buckets(ew: nd, lo: nd, hi: nd):
 
 
 @ti.kernel
-def _largest_gap(lo: nd, hi: nd) -> ti.f64:
+def _largest_gap(lo: nd, hi: nd) -> float:
     # With as many buckets as headings, the largest gap between consecutive headings on
     # the circle is one between buckets (pigeonhole), so one pass over the buckets finds
     # it: the sort this replaces cost 50 ms at N = 10^6.
@@ -85,7 +85,7 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
     def pair(i, k, d, acc, S: ti.template()):
         ew, theta, prm, parent = ti.static(S[0], S[1], S[2], S[3])
         # Branch-free accumulation: w is 1 for a neighbour, 0 otherwise.
-        w = ti.cast(within(d.dot(d), prm[P.R2], inclusive), ti.f64)
+        w = ti.cast(within(d.dot(d), prm[P.R2], inclusive), float)
         if ti.static(rule == RULES["vicsek"]):
             acc += w * ti.math.vec3(ew[k, 0], ew[k, 1], 1.0)
         else:
@@ -185,18 +185,18 @@ class VicsekKernel(ModelKernel):
             arrays["theta"] = theta
         self.state = SortedState(arrays)
         self._swap = tuple(arrays)
-        self._no_theta = ti.ndarray(ti.f64, shape=1)  # stands in for theta (vicsek rule)
+        self._no_theta = ti.ndarray(float, shape=1)  # stands in for theta (vicsek rule)
         self.grid = Grid(n, radius, L if self.periodic else None, policy)
         self.graph = MetricGraph(n, radius, scenario.inclusive, self.periodic)
-        self.prm = ti.ndarray(ti.f64, shape=P.size)
-        self.prm.from_numpy(P.pack(
+        self.prm = ti.ndarray(float, shape=P.size)
+        self.prm.from_numpy(as_real(P.pack(
             R2=radius * radius, V0DT=p.v0 * scenario.time.dt, ETA=p.eta, G=p.g or 1.0, L=L,
             THETA0=p.leader_heading,
-        ))
+        )))
         self.bad = ti.ndarray(ti.i32, shape=1)
         if p.rule == "vicsek":
-            self._arc_lo = ti.ndarray(ti.f64, shape=n)
-            self._arc_hi = ti.ndarray(ti.f64, shape=n)
+            self._arc_lo = ti.ndarray(float, shape=n)
+            self._arc_hi = ti.ndarray(float, shape=n)
         variant = (RULES[p.rule], scenario.inclusive, self.periodic,
                    p.position_update == "new_heading")
         self.kernel = step_kernel(*variant, False)
@@ -254,12 +254,12 @@ class VicsekKernel(ModelKernel):
     def observe(self, step: int) -> dict[str, float]:
         self.state.sort(self.grid, step)
         st = self.state
-        e = st["ew"].to_numpy()  # unit vectors e(theta_i); column sums: 15x numpy's sum(0)
+        e = wide(st["ew"])  # unit vectors e(theta_i); column sums: 15x numpy's sum(0)
         obs = {"polarization": float(np.hypot(e[:, 0].sum(), e[:, 1].sum()) / self.n)}
         if self.p.rule == "vicsek":
             obs["heading_spread"] = self.circular_spread(st["ew"])
         else:
-            theta = st["theta"].to_numpy()
+            theta = wide(st["theta"])
             obs["heading_spread"] = float(theta.max() - theta.min())
         if self.p.rule == "leader":
             obs["leader_error"] = float(np.abs(theta - self.p.leader_heading).max())
