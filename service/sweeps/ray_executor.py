@@ -224,14 +224,24 @@ class RayExecutor:
                should_stop: StopFn) -> None:
         """Wait for every task of `pending` (ref -> what `done` gets back with the value),
         cancelling them all once should_stop() is true."""
+        from ray import exceptions as rx
+
         ray = connect(self.address)
         cancel_at: float | None = None  # when the cooperative cancel was sent
         forced = False
         last_news = time.monotonic()
         try:
             while pending:
-                ready, _ = ray.wait(list(pending), num_returns=len(pending),
-                                    timeout=WAIT_SECONDS, fetch_local=True)
+                try:
+                    ready, _ = ray.wait(list(pending), num_returns=len(pending),
+                                        timeout=WAIT_SECONDS, fetch_local=True)
+                except rx.RayError as exc:
+                    # The cluster going down mid-call (this driver's raylet first, say)
+                    # makes Ray raise from its own machinery: an uncaught Ray error would
+                    # end the driver only after Ray's hook waited a minute for the GCS.
+                    raise ClusterTaskLost(self.address, f"lost the Ray cluster at "
+                                          f"{self.address} mid-run ({_first_line(exc)})"
+                                          ) from None
                 for ref in ready:
                     meta = pending.pop(ref)
                     value = self._value(ray, ref, stopping=cancel_at is not None)
@@ -279,13 +289,13 @@ class RayExecutor:
                 raise cause from None  # e.g. BackendUnavailable, as the local executor
             raise ClusterTaskLost(self.address, f"a Ray task failed on the cluster at "
                                   f"{self.address}: {exc}") from None
-        except (rx.WorkerCrashedError, rx.NodeDiedError, rx.ObjectLostError,
-                rx.OwnerDiedError, rx.RaySystemError) as exc:
+        except rx.RayError as exc:  # a worker, a node, an object or the raylet lost
             if stopping:
                 return _CANCELLED  # a force-cancelled task's worker was killed by us
+            self._check_alive(ray)  # the whole cluster gone: say so
             raise ClusterTaskLost(
                 self.address, f"a Ray task was lost on the cluster at {self.address} after "
-                f"its retry ({type(exc).__name__}: {str(exc).splitlines()[0]})") from None
+                f"its retry ({_first_line(exc)})") from None
 
     def _check_alive(self, ray: Any) -> None:
         """ClusterTaskLost when the cluster's head no longer accepts connections. (Asked
@@ -302,6 +312,10 @@ class RayExecutor:
             _connected = None  # reconnect on the next use; the old session is dead
             raise ClusterTaskLost(self.address, f"lost the Ray cluster at {self.address} "
                                   f"mid-run: its head ({gcs}) does not answer") from exc
+
+
+def _first_line(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
 
 
 _CANCELLED = object()
