@@ -278,6 +278,8 @@ def cmd_models(args: argparse.Namespace) -> int:
         print(f"  equations: {m['equations']}")
         print(f"  neighbourhood: |r_ij| {'<=' if m['paper_inclusive'] else '<'} radius "
               f"(paper's choice); state: {', '.join(m['state'])}")
+        note = f" ({m['dimensions_note']})" if m["dimensions_note"] else ""
+        print(f"  dimensions: {', '.join(map(str, m['dimensions']))}{note}")
         print("  parameters:")
         for p in m["parameters"]:
             default = "required" if p["required"] else f"default {_fmt(p['default'])}"
