@@ -21,6 +21,8 @@ def adjacency(pos: np.ndarray, r: float, L: float | None, inclusive: bool) -> np
     """Boolean A[i, j]: j is a neighbour of i (i != j)."""
     d = displacements(pos, L)
     d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
+    if pos.shape[1] == 3:
+        d2 = d2 + d[..., 2] * d[..., 2]
     a = d2 <= r * r if inclusive else d2 < r * r
     np.fill_diagonal(a, False)
     return a
