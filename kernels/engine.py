@@ -133,6 +133,8 @@ def fused_batch(scenario: Scenario, backend: str) -> Callable | None:
     cls = kernel_for(scenario.model.kind).batch
     if cls is None or backend != "cpu" or scenario.n_agents > FUSED_MAX_N:
         return None
+    if scenario.dimension != 2:  # the fused kernels are 2D: 3D takes the per-step path
+        return None
     return cls if cls.batch_key(scenario) is not None else None
 
 
@@ -175,7 +177,8 @@ def _batches(scenarios: Sequence[Scenario]) -> list[list[int]]:
     out: list[list[int]] = []
     for i, sc in enumerate(scenarios):
         cls = kernel_for(sc.model.kind).batch
-        key = None if cls is None or sc.n_agents > FUSED_MAX_N else cls.batch_key(sc)
+        key = (None if cls is None or sc.n_agents > FUSED_MAX_N or sc.dimension != 2
+               else cls.batch_key(sc))
         if key is None:
             out.append([i])
             continue

@@ -2,9 +2,11 @@
 
 Layout (H5MD 1.1, https://www.nongnu.org/h5md/h5md.html):
   /h5md                      version, author, creator
-  /particles/swarm/box       dimension = 2, boundary = periodic|none (x2), edges = [L, L]
-  /particles/swarm/<array>   step (F,), time (F,), value (F, N, 2) or (F, N)
-                             array: position, velocity, heading (heading is flocklab's)
+  /particles/swarm/box       dimension = D (2 or 3: space.dimension),
+                             boundary = periodic|none (xD), edges = [L] * D
+  /particles/swarm/<array>   step (F,), time (F,), value (F, N, D) or (F, N)
+                             array: position, velocity, heading (heading is flocklab's:
+                             (F, N) angles in 2D, (F, N, 3) unit vectors in 3D)
   /observables/<name>        step (T,), time (T,), value (T,)
   /parameters/flocklab       attribute `scenario`: the canonical scenario JSON
 Frames are chunked one per chunk so a frame range can be read without the whole file.
@@ -36,12 +38,13 @@ class H5MDWriter:
         creator.attrs["version"] = VERSION
         self.swarm = self.f.create_group("particles/swarm")
         box = self.swarm.create_group("box")
-        box.attrs["dimension"] = 2
+        dim = scenario.dimension
+        box.attrs["dimension"] = dim
         if isinstance(scenario.space, PeriodicBox):
-            box.attrs["boundary"] = np.array([b"periodic", b"periodic"])
-            box.create_dataset("edges", data=np.array([scenario.space.L] * 2))
+            box.attrs["boundary"] = np.array([b"periodic"] * dim)
+            box.create_dataset("edges", data=np.array([scenario.space.L] * dim))
         else:
-            box.attrs["boundary"] = np.array([b"none", b"none"])
+            box.attrs["boundary"] = np.array([b"none"] * dim)
         params = self.f.create_group("parameters/flocklab")
         params.attrs["scenario"] = scenario.model_dump_json()
         self.frames = 0
