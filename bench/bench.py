@@ -48,8 +48,8 @@ def _peak_rss() -> int:
 
 def measure_one(label: str, n: int, steps: int, backend: str) -> dict:
     """Runs in a child process: warm up, reset the peak RSS, run, report."""
-    import kernels
-    from schemas import Scenario
+    from flocklab import kernels
+    from flocklab.schemas import Scenario
 
     spec = workloads()[label](n)
     spec["backend"] = backend

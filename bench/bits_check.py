@@ -58,8 +58,8 @@ def scenarios(max_steps: int, large_n: int, large_steps: int
     """(case name, scenario document) for every example scenario and preset, with the step
     count cut to `max_steps` (`large_steps` above `large_n` agents), and the final frame of
     every per-agent array recorded."""
-    from schemas import Scenario
-    from schemas.presets import PRESETS, get_preset
+    from flocklab.schemas import Scenario
+    from flocklab.schemas.presets import PRESETS, get_preset
 
     docs: list[tuple[str, dict[str, Any]]] = []
     for path in sorted((ROOT / "examples").glob("*.json")):
@@ -84,9 +84,9 @@ def scenarios(max_steps: int, large_n: int, large_steps: int
 
 def run_case(doc: dict[str, Any], path: str) -> dict[str, Any]:
     """Run one scenario on `path` ("per_step" or "fused") and hash what it produced."""
-    import kernels
-    from kernels import engine
-    from schemas import Scenario
+    from flocklab import kernels
+    from flocklab.kernels import engine
+    from flocklab.schemas import Scenario
 
     scenario = Scenario.model_validate(doc)
     sink = LastFrame()
@@ -108,8 +108,8 @@ def run_case(doc: dict[str, Any], path: str) -> dict[str, Any]:
 
 def paths_for(doc: dict[str, Any]) -> list[str]:
     """The engine paths that apply to a scenario: per-step always, fused where chosen."""
-    from kernels import engine
-    from schemas import Scenario
+    from flocklab.kernels import engine
+    from flocklab.schemas import Scenario
 
     fused = engine.fused_batch(Scenario.model_validate(doc), "cpu") is not None
     return ["per_step", "fused"] if fused else ["per_step"]
@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="step cap of the large scenarios (default 150)")
     args = ap.parse_args(argv)
 
-    from kernels import runtime
+    from flocklab.kernels import runtime
 
     runtime.ensure("cpu")
     results: dict[str, Any] = {}

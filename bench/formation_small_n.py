@@ -23,7 +23,7 @@ import time
 
 
 def scenario(n: int, steps: int):
-    from schemas import Scenario, get_preset
+    from flocklab.schemas import Scenario, get_preset
 
     base = get_preset("xi-abed-sim3").model_dump(mode="json")
     side = 50.0 * math.sqrt(n / 100.0)
@@ -36,8 +36,8 @@ def scenario(n: int, steps: int):
 
 
 def timed(sc, fused: bool) -> dict:
-    import kernels
-    from kernels import engine
+    from flocklab import kernels
+    from flocklab.kernels import engine
 
     engine.FUSED_MAX_N = 20_000 if fused else 0
     load = os.getloadavg()[0]
@@ -61,8 +61,8 @@ def main() -> None:
     ap.add_argument("--preset", default="xi-abed-sim1")
     ap.add_argument("--preset-steps", type=int, default=10_000)
     args = ap.parse_args()
-    from kernels import runtime
-    from schemas import get_preset
+    from flocklab.kernels import runtime
+    from flocklab.schemas import get_preset
 
     runtime.ensure("cpu")
     for fused in (True, False):  # compile both paths' kernels first

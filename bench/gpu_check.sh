@@ -203,7 +203,7 @@ from pathlib import Path
 
 import httpx
 
-from service.serve import ServerProcess
+from flocklab.service.serve import ServerProcess
 
 backend, work, smoke = sys.argv[1], Path(sys.argv[2]), sys.argv[3] == "smoke"
 PRESETS = {"vicsek": "vicsek-1995", "flocking": "tjp-switching",

@@ -62,7 +62,7 @@ def load() -> list[float]:
 
 def sweep(spec: Path, out: Path, address: str | None) -> float:
     """Wall seconds of one `flocklab sweep` into a fresh folder (as the CLI reports it)."""
-    cmd = [sys.executable, "-m", "service.cli", "sweep", str(spec), "--out", str(out),
+    cmd = [sys.executable, "-m", "flocklab", "sweep", str(spec), "--out", str(out),
            "--quiet"]
     if address:
         cmd += ["--executor", "ray", "--ray-address", address]
@@ -106,9 +106,9 @@ def overhead_warm(cluster: LocalRayCluster, tmp: Path) -> None:
     code = f"""
 import json, sys, time
 from pathlib import Path
-from schemas.sweep import load_sweep
-from service.sweeps.executors import ExecutorConfig, make_executor
-from service.sweeps.runner import run_sweep
+from flocklab.schemas.sweep import load_sweep
+from flocklab.service.sweeps.executors import ExecutorConfig, make_executor
+from flocklab.service.sweeps.runner import run_sweep
 sweep = load_sweep(json.loads(Path(sys.argv[1]).read_text()))
 ex = make_executor(ExecutorConfig(kind=sys.argv[2], ray_address={cluster.address!r}))
 times = []

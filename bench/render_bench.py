@@ -23,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from schemas import Scenario
+from flocklab.schemas import Scenario
 
 
 def vicsek(n: int, steps: int, every: int) -> Scenario:
@@ -49,8 +49,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--keep", type=Path, help="keep the runs and pictures in this folder")
     args = p.parse_args()
-    from service.execute import execute_to_dir
-    from service.render.cli import add_arguments, render
+    from flocklab.service.execute import execute_to_dir
+    from flocklab.service.render.cli import add_arguments, render
 
     root = args.keep or Path(tempfile.mkdtemp(prefix="render-bench-"))
     root.mkdir(parents=True, exist_ok=True)
@@ -61,7 +61,7 @@ def main() -> None:
         out = root / (f"{name}.mp4" if "--movie" in extra else f"{name}.png")
         argv = [str(folder), "--out", str(out), *extra]
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "service.cli", "render", *argv], check=True,
+        subprocess.run([sys.executable, "-m", "flocklab", "render", *argv], check=True,
                        capture_output=True)
         cli = time.perf_counter() - t0
         parser = argparse.ArgumentParser()

@@ -26,9 +26,9 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import clients
-from schemas import Scenario
-from service.serve import ServerProcess
+from flocklab import clients
+from flocklab.schemas import Scenario
+from flocklab.service.serve import ServerProcess
 
 
 def vicsek(n: int, steps: int) -> dict[str, Any]:
@@ -61,8 +61,8 @@ def timed_job(c: clients.Client, spec: dict[str, Any]) -> tuple[float, float]:
 
 def bare(scenario: Scenario) -> tuple[float, float]:
     """Wall time of kernels.run and of execute_to_dir for one run, in this process."""
-    import kernels
-    from service.execute import execute_to_dir
+    from flocklab import kernels
+    from flocklab.service.execute import execute_to_dir
 
     t0 = time.perf_counter()
     kernels.run(scenario)

@@ -50,9 +50,10 @@ def vicsek_scenario(n: int, L: float, eta: float, steps: int, seed: int = 1,
 
 
 def single(sizes: list[int], steps: int) -> None:
-    import kernels
+    from flocklab import kernels
+    from flocklab.schemas import Scenario
+
     from bench import ckdtree_vicsek
-    from schemas import Scenario
 
     for n, chosen in ((n, c) for n in sizes for c in (None, ["polarization"])):
         L = math.sqrt(n / 4.0)
@@ -121,7 +122,7 @@ def fig2a_sweep() -> None:
         spec = Path(tmp) / "sweep.json"
         spec.write_text(json.dumps(sweep_spec()))
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "service.cli", "sweep", str(spec),
+        subprocess.run([sys.executable, "-m", "flocklab", "sweep", str(spec),
                         "--out", str(Path(tmp) / "out")], check=True,
                        stdout=subprocess.DEVNULL)
         ours_s = time.perf_counter() - t0
@@ -145,7 +146,7 @@ def fig2a_sweep() -> None:
 def full_fig2a() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "service.cli", "sweep", "preset:vicsek-1995-fig2a",
+        subprocess.run([sys.executable, "-m", "flocklab", "sweep", "preset:vicsek-1995-fig2a",
                         "--out", str(Path(tmp) / "out")], check=True, stdout=subprocess.DEVNULL)
         print(json.dumps({"bench": "fig2a-full-protocol",
                           "seconds": round(time.perf_counter() - t0, 1)}), flush=True)

@@ -19,7 +19,7 @@ import math
 import os
 import time
 
-from schemas import PRESETS, Scenario
+from flocklab.schemas import PRESETS, Scenario
 
 SIZES = [5, 20, 100, 1000]
 
@@ -39,8 +39,8 @@ def preset_like(name: str, n: int, steps: int) -> Scenario:
 
 
 def timed(sc: Scenario, fused: bool) -> dict:
-    import kernels
-    from kernels import engine
+    from flocklab import kernels
+    from flocklab.kernels import engine
 
     engine.FUSED_MAX_N = 20_000 if fused else 0
     kernels.run(Scenario.model_validate({**sc.model_dump(mode="json"),
@@ -60,7 +60,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", action="store_true", help="the per-N table only")
     args = ap.parse_args()
-    from kernels import runtime
+    from flocklab.kernels import runtime
 
     runtime.ensure("cpu", 1)
     for n in SIZES:

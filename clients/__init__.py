@@ -3,7 +3,7 @@
 Needs only httpx, numpy and `schemas` (pydantic): importing it never imports Taichi or
 FastAPI.
 
-    from clients import Client
+    from flocklab.clients import Client
     with Client("http://127.0.0.1:8000") as c:
         job = c.submit(preset="vicsek-1995").wait()
         metrics = job.metrics()

@@ -13,8 +13,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
-
-from schemas import Scenario
+from flocklab.schemas import Scenario
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 TERMINAL = frozenset({"succeeded", "failed", "cancelled", "timed_out"})

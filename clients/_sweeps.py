@@ -6,9 +6,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-
-from schemas.status import SweepStatus
-from schemas.sweep import Sweep
+from flocklab.schemas.status import SweepStatus
+from flocklab.schemas.sweep import Sweep
 
 from .errors import FlocklabError
 

@@ -10,10 +10,9 @@ from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
-
-from schemas import Scenario
-from schemas.status import SweepStatus
-from schemas.sweep import Sweep
+from flocklab.schemas import Scenario
+from flocklab.schemas.status import SweepStatus
+from flocklab.schemas.sweep import Sweep
 
 from . import _core, _sweeps
 from .errors import JobTimeout, raise_for_status

@@ -11,8 +11,7 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
-
-from schemas import Scenario
+from flocklab.schemas import Scenario
 
 from . import batch, runtime
 from .model import ModelKernel, kernel_for

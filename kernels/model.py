@@ -13,8 +13,7 @@ from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 import numpy as np
-
-from schemas import Scenario
+from flocklab.schemas import Scenario
 
 from .runtime import DevicePolicy
 
@@ -60,10 +59,10 @@ KERNELS: dict[str, type[ModelKernel]] = {}
 # engine imports a family only when a scenario of that kind runs: importing them all costs
 # about a second of Python at every start, which a short run or a sweep worker would pay.
 MODULES = {
-    "vicsek": "kernels.models.vicsek.kernel",
-    "flocking": "kernels.models.flocking.kernel",
-    "flocking_obstacles": "kernels.models.flocking.obstacles",
-    "formation": "kernels.models.formation.kernel",
+    "vicsek": "flocklab.kernels.models.vicsek.kernel",
+    "flocking": "flocklab.kernels.models.flocking.kernel",
+    "flocking_obstacles": "flocklab.kernels.models.flocking.obstacles",
+    "formation": "flocklab.kernels.models.formation.kernel",
 }
 
 

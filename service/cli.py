@@ -17,9 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from pydantic import ValidationError
-
-from schemas import (
+from flocklab.schemas import (
     PRESETS,
     FieldError,
     Scenario,
@@ -28,10 +26,11 @@ from schemas import (
     get_preset,
     parse_json_strict,
 )
-from schemas.paths import PathError, parse_assignment, set_path
-from schemas.sweep import Sweep, SweepError, describe_sweep, is_sweep_document, load_sweep
-from schemas.sweep_presets import SWEEP_PRESETS
-from schemas.vicsek_presets import DEFAULT_PRESET
+from flocklab.schemas.paths import PathError, parse_assignment, set_path
+from flocklab.schemas.sweep import Sweep, SweepError, describe_sweep, is_sweep_document, load_sweep
+from flocklab.schemas.sweep_presets import SWEEP_PRESETS
+from flocklab.schemas.vicsek_presets import DEFAULT_PRESET
+from pydantic import ValidationError
 
 EXIT_OK, EXIT_RUN_FAILED, EXIT_BAD_INPUT, EXIT_BACKEND = 0, 1, 2, 3
 
@@ -142,7 +141,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario, args.set or ())
     if args.backend:
         scenario = scenario.model_copy(update={"backend": args.backend})
-    from kernels import BackendUnavailable
+    from flocklab.kernels import BackendUnavailable
 
     from .execute import execute_to_dir
 
@@ -172,7 +171,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if not (out / "sweep.json").exists():
             raise BadInput(f"{out} holds no sweep; --overwrite replaces sweep folders only")
         shutil.rmtree(out)
-    from kernels import BackendUnavailable
+    from flocklab.kernels import BackendUnavailable
 
     from .sweeps.executors import ExecutorConfig, make_executor
     from .sweeps.ray_executor import ClusterError

@@ -21,11 +21,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-
-from schemas import Scenario
+from flocklab.schemas import Scenario
 
 if TYPE_CHECKING:
-    from kernels import RunResult
+    from flocklab.kernels import RunResult
 
 ARTIFACTS = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5")
 
@@ -60,7 +59,7 @@ def execute_to_dir(
 ) -> dict[str, Any]:
     """Run `scenario` and write its artifacts to `out_dir`. Returns the summary dict;
     `on_result` gets the engine's result before the folder is moved into place."""
-    import kernels  # the engine: only where a simulation runs
+    from flocklab import kernels  # the engine: only where a simulation runs
 
     from .h5md import H5MDWriter
 

@@ -18,8 +18,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-
-from schemas import PeriodicBox, Scenario
+from flocklab.schemas import PeriodicBox, Scenario
 
 VERSION = "0.1.0"
 

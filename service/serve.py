@@ -38,16 +38,15 @@ def cli_main(argv: list[str]) -> int:
     """Parse `argv` (the arguments after `serve`), serve until interrupted, return 0."""
     args = build_parser().parse_args(argv)
     import uvicorn
-
-    from service.app import create_app, load_settings
-    from service.app.connections import (
+    from flocklab.service.app import create_app, load_settings
+    from flocklab.service.app.connections import (
         ConnectionLimits,
         connection_cap,
         guarded_protocol,
         quiet_noisy_loggers,
         raise_fd_limit,
     )
-    from service.jobs import data_dir_locked
+    from flocklab.service.jobs import data_dir_locked
 
     overrides = {k: v for k, v in (("data_dir", args.data_dir), ("workers", args.workers),
                                    ("executor", args.executor),
@@ -120,7 +119,7 @@ class ServerProcess:
         """Start and wait until /healthz answers 200."""
         import httpx
 
-        cmd = [sys.executable, "-m", "service.serve", "--port", str(self.port),
+        cmd = [sys.executable, "-m", "flocklab.service.serve", "--port", str(self.port),
                "--data-dir", str(self.data_dir), "--log-level", self.log_level]
         with self.log_path.open("ab") as log:
             self.proc = subprocess.Popen(cmd, env={**os.environ, **self.env}, stdout=log,

@@ -8,7 +8,7 @@ os.environ.setdefault("TI_LOG_LEVEL", "warn")
 @pytest.fixture(scope="session")
 def taichi_cpu():
     """Taichi on the CPU in the test process (all engine tests run on the main thread)."""
-    from kernels import runtime
+    from flocklab.kernels import runtime
 
     return runtime.ensure("cpu")
 
@@ -17,7 +17,7 @@ def taichi_cpu():
 def fixed_windows(monkeypatch):
     """Make the fused driver's windows a fixed number of agent-steps (instead of ~0.1 s
     of work), so a test can cut a run at known steps."""
-    from kernels import batch
+    from flocklab.kernels import batch
 
     def fix(agent_steps: int) -> None:
         monkeypatch.setattr(batch, "WINDOW_AGENT_STEPS", agent_steps)

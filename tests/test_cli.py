@@ -20,7 +20,7 @@ SMALL = {
 
 
 def flocklab(*args, stdin=None):
-    return subprocess.run([sys.executable, "-m", "service.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "flocklab", *args], capture_output=True,
                           text=True, input=stdin, timeout=300)
 
 

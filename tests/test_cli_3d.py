@@ -64,7 +64,7 @@ def test_a_3d_angle_rule_is_refused_with_its_field(tmp_path):
 def test_the_3d_examples_and_presets_agree(example, preset):
     from pathlib import Path
 
-    from schemas import Scenario, get_preset
+    from flocklab.schemas import Scenario, get_preset
 
     path = Path(__file__).parent.parent / "examples" / f"{example}.json"
     sc = Scenario.model_validate_json(path.read_text())

@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-import kernels
-from kernels.model import all_kernels
-from kernels.models.flocking.fused import FlockingBatch
-from kernels.runtime import DevicePolicy
-from schemas import Scenario
+from flocklab import kernels
+from flocklab.kernels.model import all_kernels
+from flocklab.kernels.models.flocking.fused import FlockingBatch
+from flocklab.kernels.runtime import DevicePolicy
+from flocklab.schemas import Scenario
 
 TOL = 1e-10
 

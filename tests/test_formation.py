@@ -6,15 +6,14 @@ import math
 
 import numpy as np
 import pytest
+from flocklab import kernels
+from flocklab.kernels.models.formation.path import make_path
+from flocklab.kernels.models.formation.props import at_leader, d2_isolated, d3_holds, roots
+from flocklab.kernels.models.formation.schedule import OffsetSchedule
+from flocklab.kernels.models.formation.shapes import named_offsets
+from flocklab.schemas import Scenario
+from flocklab.schemas.formation import FormationChange, NamedFormation, SplinePath
 from pydantic import ValidationError
-
-import kernels
-from kernels.models.formation.path import make_path
-from kernels.models.formation.props import at_leader, d2_isolated, d3_holds, roots
-from kernels.models.formation.schedule import OffsetSchedule
-from kernels.models.formation.shapes import named_offsets
-from schemas import Scenario
-from schemas.formation import FormationChange, NamedFormation, SplinePath
 
 D = 20.0
 
@@ -414,7 +413,7 @@ def test_spline_path_passes_waypoints_at_constant_speed():
 
 
 def test_straight_path_by_speed_or_arrival_time():
-    from schemas.formation import StraightPath
+    from flocklab.schemas.formation import StraightPath
 
     a = make_path(StraightPath(target=(3.0, 4.0), speed=2.5), np.zeros(2))
     b = make_path(StraightPath(target=(3.0, 4.0), arrival_time=2.0), np.zeros(2))

@@ -4,10 +4,10 @@ scenario alone. (The plane is M4's only space.)"""
 
 import numpy as np
 import pytest
+from flocklab import kernels
+from flocklab.kernels import engine
+from flocklab.kernels.models.formation.fused import MAX_N, FormationBatch
 
-import kernels
-from kernels import engine
-from kernels.models.formation.fused import MAX_N, FormationBatch
 from tests.test_formation import STRAIGHT, explicit, scenario
 
 SPLINE = {"kind": "spline", "waypoints": [[0.0, 60.0], [-50.0, 50.0]], "arrival_time": 2.0}
@@ -153,8 +153,8 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
 def test_the_spline_table_is_the_scalar_path():
     """The vectorised arc-length inversion the fused path tabulates p(t) and q(t) with
     gives the scalar solver's values (to its tolerance), before and after the arrival."""
-    from kernels.models.formation.path import SplineTable, make_path
-    from schemas.formation import SplinePath
+    from flocklab.kernels.models.formation.path import SplineTable, make_path
+    from flocklab.schemas.formation import SplinePath
 
     spline = make_path(SplinePath.model_validate(SPLINE), np.array([25.0, 25.0]))
     t = np.linspace(0.0, 2.5, 601)  # arrival at 2.0

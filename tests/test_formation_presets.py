@@ -2,9 +2,8 @@
 
 import numpy as np
 import pytest
-
-import kernels
-from schemas import get_preset
+from flocklab import kernels
+from flocklab.schemas import get_preset
 
 
 def observe_only(name, every):
@@ -108,7 +107,7 @@ def test_sim3_ends_in_an_f2_formation(engine_path):
 def test_examples_are_the_presets(example, preset):
     from pathlib import Path
 
-    from schemas import Scenario
+    from flocklab.schemas import Scenario
 
     path = Path(__file__).parent.parent / "examples" / example
     assert Scenario.model_validate_json(path.read_text()) == get_preset(preset)

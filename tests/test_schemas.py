@@ -4,9 +4,8 @@ import json
 import math
 
 import pytest
+from flocklab.schemas import MODELS, PRESETS, Scenario, field_errors, get_preset, parse_json_strict
 from pydantic import ValidationError
-
-from schemas import MODELS, PRESETS, Scenario, field_errors, get_preset, parse_json_strict
 
 GOOD = {
     "model": {"kind": "vicsek", "rule": "average"},
@@ -112,14 +111,14 @@ def test_every_preset_is_valid():
 def test_embedded_default_is_the_example():
     from pathlib import Path
 
-    from schemas.vicsek_presets import DEFAULT_PRESET
+    from flocklab.schemas.vicsek_presets import DEFAULT_PRESET
 
     example = Path(__file__).parent.parent / "examples" / "vicsek.json"
     assert Scenario.model_validate_json(example.read_text()) == get_preset(DEFAULT_PRESET)
 
 
 def test_schema_and_kernel_registries_agree():
-    from kernels.model import MODULES, all_kernels
+    from flocklab.kernels.model import MODULES, all_kernels
 
     assert set(MODELS) == set(all_kernels()) == set(MODULES)
 
@@ -128,9 +127,8 @@ def test_every_model_runs_reproducibly_on_every_available_backend(taichi_cpu):
     """Each registered model, through a preset of its own, cut to a few steps: the same seed
     gives the same frames bit for bit. GPU backends join when one is present."""
     import numpy as np
-
-    import kernels
-    from kernels import runtime
+    from flocklab import kernels
+    from flocklab.kernels import runtime
 
     backends = ["cpu"] + [b for b in ("cuda", "vulkan") if runtime.gpu_available(b)]
     by_kind = {}
@@ -166,9 +164,8 @@ def test_every_model_runs_reproducibly_on_every_available_backend(taichi_cpu):
 
 
 def test_jittered_lattice_start_keeps_agents_apart():
+    from flocklab.kernels.space.initial import initial_state
     from scipy.spatial import cKDTree
-
-    from kernels.space.initial import initial_state
 
     data = with_("initial", {"kind": "random", "N": 1600, "region": {
         "kind": "lattice", "low": [1, 1], "spacing": 0.2, "jitter": 0.3}})
@@ -185,9 +182,8 @@ def test_jittered_lattice_start_keeps_agents_apart():
 
 
 def test_vicsek_noise_above_two_pi_is_refused():
+    from flocklab.schemas.vicsek import VicsekParams
     from pydantic import ValidationError
-
-    from schemas.vicsek import VicsekParams
 
     assert VicsekParams.model_validate({"eta": 2 * math.pi}).eta == 2 * math.pi
     with pytest.raises(ValidationError, match=r"less than or equal to 6\.28"):

@@ -6,9 +6,8 @@ import subprocess
 import sys
 
 import pytest
+from flocklab.schemas import MODELS, Scenario, field_errors
 from pydantic import ValidationError
-
-from schemas import MODELS, Scenario, field_errors
 
 BASE = {
     "model": {"kind": "vicsek", "eta": 0.5},
@@ -103,10 +102,10 @@ def test_mismatches_are_field_errors(change, loc, words):
 
 
 def test_models_command_shows_dimensions():
-    out = subprocess.run([sys.executable, "-m", "service.cli", "models"], check=True,
+    out = subprocess.run([sys.executable, "-m", "flocklab", "models"], check=True,
                          capture_output=True, text=True).stdout
     assert "dimensions: 2, 3 (3D for rule vicsek only" in out
-    js = json.loads(subprocess.run([sys.executable, "-m", "service.cli", "models", "--json"],
+    js = json.loads(subprocess.run([sys.executable, "-m", "flocklab", "models", "--json"],
                                    check=True, capture_output=True, text=True).stdout)
     dims = {m["kind"]: m["dimensions"] for m in js if "dimensions" in m}
     assert dims["vicsek"] == [2, 3]

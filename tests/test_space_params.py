@@ -3,9 +3,8 @@ device policy the grids are built with."""
 
 import numpy as np
 import pytest
-
-from kernels.runtime import DevicePolicy
-from kernels.space.params import Slots
+from flocklab.kernels.runtime import DevicePolicy
+from flocklab.kernels.space.params import Slots
 
 
 def test_slots_number_names_in_order_and_blocks_after_them():

@@ -7,8 +7,8 @@ import subprocess
 import sys
 import time
 
-from schemas.sweep import load_sweep
-from service.cli import main
+from flocklab.schemas.sweep import load_sweep
+from flocklab.service.cli import main
 
 SWEEP = {
     "name": "cli",
@@ -22,7 +22,7 @@ SWEEP = {
 
 
 def flocklab(*args, stdin=None):
-    return subprocess.run([sys.executable, "-m", "service.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "flocklab", *args], capture_output=True,
                           text=True, input=stdin, timeout=300)
 
 
@@ -145,7 +145,7 @@ def test_ctrl_c_keeps_finished_runs_and_a_rerun_resumes(tmp_path):
                axes=[{"path": "model.eta", "values": [0.5, 3.0]}], replicas=2,
                measure={"va": {"observable": "polarization", "reduce": "mean"}})
     path, out = write(tmp_path, "long.json", doc), tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "service.cli", "sweep", path, "--out",
+    proc = subprocess.Popen([sys.executable, "-m", "flocklab", "sweep", path, "--out",
                              str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, "FLOCKLAB_SWEEP_BATCH_RUNS": "1"})
     journal = out / "runs.jsonl"

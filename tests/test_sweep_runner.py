@@ -6,12 +6,11 @@ import math
 
 import numpy as np
 import pytest
-
-from schemas.sweep import SweepError, load_sweep
-from schemas.sweep_presets import SWEEP_PRESETS
-from service.cli import main
-from service.sweeps import SweepFolderConflict, read_table, run_sweep
-from service.sweeps.journal import read_journal
+from flocklab.schemas.sweep import SweepError, load_sweep
+from flocklab.schemas.sweep_presets import SWEEP_PRESETS
+from flocklab.service.cli import main
+from flocklab.service.sweeps import SweepFolderConflict, read_table, run_sweep
+from flocklab.service.sweeps.journal import read_journal
 
 OVERRIDES = {"time": {"steps": 40}, "initial": {"N": 20},
              "recording": {"every": 0, "observables_every": 5}}

@@ -6,11 +6,10 @@ import math
 from pathlib import Path
 
 import pytest
-
-from schemas import Scenario, get_preset
-from schemas.paths import PathError, merge, parse_assignment, set_path
-from schemas.sweep import MAX_RUNS, Sweep, SweepError, load_sweep, sweep_problems
-from schemas.sweep_presets import SWEEP_PRESETS, get_sweep_preset
+from flocklab.schemas import Scenario, get_preset
+from flocklab.schemas.paths import PathError, merge, parse_assignment, set_path
+from flocklab.schemas.sweep import MAX_RUNS, Sweep, SweepError, load_sweep, sweep_problems
+from flocklab.schemas.sweep_presets import SWEEP_PRESETS, get_sweep_preset
 
 BASE = {
     "model": {"kind": "vicsek", "rule": "vicsek", "v0": 0.03, "eta": 0.5},

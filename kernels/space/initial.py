@@ -9,8 +9,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
-from schemas import ExplicitInitial, PeriodicBox, Scenario
+from flocklab.schemas import ExplicitInitial, PeriodicBox, Scenario
 
 
 @dataclass

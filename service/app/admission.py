@@ -21,10 +21,9 @@ import logging
 import time
 from typing import Any
 
+from flocklab.service.jobs.disk import free_bytes
+from flocklab.service.jobs.problems import problem
 from starlette.types import ASGIApp, Receive, Scope, Send
-
-from service.jobs.disk import free_bytes
-from service.jobs.problems import problem
 
 from .problems import PROBLEM_MEDIA_TYPE
 from .queue_gauge import QueueGauge

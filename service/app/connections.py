@@ -32,9 +32,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import h11
+from flocklab.service.jobs.problems import problem
 from uvicorn.protocols.http.h11_impl import H11Protocol
-
-from service.jobs.problems import problem
 
 log = logging.getLogger("flocklab.connections")
 

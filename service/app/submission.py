@@ -15,10 +15,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import pydantic_core
+from flocklab.schemas import PRESETS, FieldError, Scenario, field_errors, parse_json_strict
+from flocklab.service.jobs import check_limits
 from pydantic import ValidationError
-
-from schemas import PRESETS, FieldError, Scenario, field_errors, parse_json_strict
-from service.jobs import check_limits
 
 from .problems import ProblemError, invalid
 from .settings import Settings

@@ -5,12 +5,11 @@ from __future__ import annotations
 import json
 from typing import Annotated, Any
 
+from flocklab.schemas import Problem
+from flocklab.schemas.status import SweepStatus
+from flocklab.schemas.sweep import Sweep
+from flocklab.service.jobs import Job
 from pydantic import BaseModel, ConfigDict, Field, model_validator
-
-from schemas import Problem
-from schemas.status import SweepStatus
-from schemas.sweep import Sweep
-from service.jobs import Job
 
 from .wire import _checksums, _ts
 

@@ -18,8 +18,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-
-from schemas import FieldError
+from flocklab.schemas import FieldError
 
 from .problems import ProblemError, invalid
 

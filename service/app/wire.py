@@ -6,10 +6,9 @@ import datetime as dt
 import json
 from typing import Annotated, Any, Literal
 
+from flocklab.schemas import Problem, Scenario
+from flocklab.service.jobs import Job
 from pydantic import BaseModel, ConfigDict, Field, model_validator
-
-from schemas import Problem, Scenario
-from service.jobs import Job
 
 Status = Literal["queued", "running", "succeeded", "failed", "cancelled", "timed_out"]
 

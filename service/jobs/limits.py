@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-from schemas import FieldError, Scenario
+from flocklab.schemas import FieldError, Scenario
 
 # Components per agent of each recordable array.
 COMPONENTS = {"position": 2, "velocity": 2, "heading": 1}

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from schemas.problems import json_safe
+from flocklab.schemas.problems import json_safe
 
 TERMINAL = ("succeeded", "failed", "cancelled", "timed_out")
 STATUSES = ("queued", "running", *TERMINAL)

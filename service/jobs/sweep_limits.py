@@ -7,12 +7,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from schemas import FieldError
+from flocklab.schemas import FieldError
 
 from .limits import Limits, check_limits
 
 if TYPE_CHECKING:
-    from schemas.sweep import Sweep, SweepRun
+    from flocklab.schemas.sweep import Sweep, SweepRun
 
 # Enough per-run errors to see the pattern; a 10^5-run sweep would flood the answer.
 MAX_REPORTED = 20

@@ -28,12 +28,11 @@ log = logging.getLogger("flocklab.worker")
 def run_sweep_order(order: dict[str, Any], conn: Connection,
                     should_stop: Callable[[], bool]) -> dict[str, Any]:
     """Re-validate and run one sweep attempt; every failure becomes a problem body."""
+    from flocklab.kernels.result import BackendUnavailable
+    from flocklab.schemas import field_errors
+    from flocklab.schemas.sweep import Sweep, SweepError
+    from flocklab.service.sweeps.runner import run_sweep
     from pydantic import ValidationError
-
-    from kernels.result import BackendUnavailable
-    from schemas import field_errors
-    from schemas.sweep import Sweep, SweepError
-    from service.sweeps.runner import run_sweep
 
     token = order["token"]
     try:
@@ -60,8 +59,8 @@ def run_sweep_order(order: dict[str, Any], conn: Connection,
             conn.send(("progress", token, int(p.runs_done + p.runs_failed),
                        int(p.runs_total), int(p.runs_failed)))
 
-    from service.sweeps.executors import make_executor
-    from service.sweeps.ray_executor import ClusterError
+    from flocklab.service.sweeps.executors import make_executor
+    from flocklab.service.sweeps.ray_executor import ClusterError
 
     from .worker import cluster_problem
 

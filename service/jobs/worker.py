@@ -41,7 +41,7 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
     parent = os.getppid()
     # Importing the engine here, not at module level: this module is also imported by
     # the API process (to name the target), which must never load Taichi.
-    from service.execute import execute_to_dir
+    from flocklab.service.execute import execute_to_dir
 
     def orphaned() -> bool:
         return os.getppid() != parent
@@ -82,10 +82,9 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
 
 def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dict[str, Any]:
     """Re-validate and run one attempt; every failure becomes a problem body."""
+    from flocklab.kernels.result import BackendUnavailable
+    from flocklab.schemas import Scenario, field_errors
     from pydantic import ValidationError
-
-    from kernels.result import BackendUnavailable
-    from schemas import Scenario, field_errors
 
     try:
         scenario = Scenario.model_validate_json(order["scenario"])
@@ -97,8 +96,8 @@ def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dic
     if errors:
         return {"problem": problem("limit-exceeded", "Over this service's limits", 422,
                                    errors[0].msg, errors=[e.model_dump() for e in errors])}
-    from service.sweeps.executors import make_executor
-    from service.sweeps.ray_executor import ClusterError
+    from flocklab.service.sweeps.executors import make_executor
+    from flocklab.service.sweeps.ray_executor import ClusterError
 
     executor = make_executor(order.get("executor"))
     on_ray = (order.get("executor") or {}).get("kind") == "ray"
@@ -139,7 +138,7 @@ def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dic
 
 def cluster_problem(exc: Any) -> dict[str, Any]:
     """The problem body of a ClusterError (cluster unreachable, or lost mid-job)."""
-    from service.sweeps.ray_executor import ClusterUnavailable
+    from flocklab.service.sweeps.ray_executor import ClusterUnavailable
 
     slug, title = (("cluster-unavailable", "Ray cluster unavailable")
                    if isinstance(exc, ClusterUnavailable) else
@@ -173,7 +172,7 @@ def _add_to_summary(out_dir: Path, summary: dict[str, Any], **extra: Any) -> Non
 def _warm_up(execute_to_dir: Any, preset: str, scratch: Path) -> None:
     """Run a tiny version of a preset so Taichi is initialised and its kernels compiled
     (and the offline cache written) before the first real job arrives."""
-    from schemas import PRESETS, Scenario
+    from flocklab.schemas import PRESETS, Scenario
 
     try:
         spec = PRESETS[preset].build()

@@ -90,7 +90,7 @@ def render(args: argparse.Namespace) -> dict[str, object]:
         raise RenderInputError(f"{folder}: a 3D run; snapshots and movies are drawn for 2D "
                                "runs only (--plot draws its observables)")
     if args.movie:
-        from service.cli import ProgressBar
+        from flocklab.service.cli import ProgressBar
 
         from .movie import write_movie
 

@@ -47,7 +47,7 @@ def interaction_edges(run: RunData, pos: np.ndarray) -> np.ndarray | None:
     """
     model = run.scenario.model
     if model.kind == "flocking" and model.topology == "fixed":
-        from kernels.models.flocking.topology import build_edges
+        from flocklab.kernels.models.flocking.topology import build_edges
 
         u, v = build_edges(model.graph, run.n_agents, run.scenario.seed)
         return np.column_stack([u, v]).astype(np.int64)
@@ -86,7 +86,7 @@ def leaders(run: RunData, t: float) -> Leaders | None:
     model = run.scenario.model
     if model.kind != "formation":
         return None
-    from kernels.models.formation.path import make_path
+    from flocklab.kernels.models.formation.path import make_path
 
     obs = run.observables
     if "leader_x" in obs and len(obs["leader_x"]):
@@ -98,7 +98,7 @@ def leaders(run: RunData, t: float) -> Leaders | None:
     samples = np.array([path.position(s) for s in np.linspace(0.0, t_end, 400)])
     targets = None
     if model.design == "F1":
-        from kernels.models.formation.schedule import OffsetSchedule
+        from flocklab.kernels.models.formation.schedule import OffsetSchedule
 
         d = float(run.scenario.neighbours.radius)
         b = OffsetSchedule(model.formation, model.schedule, run.n_agents, d).at(t)

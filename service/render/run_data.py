@@ -12,8 +12,7 @@ from typing import Any
 
 import h5py
 import numpy as np
-
-from schemas import PeriodicBox, Scenario
+from flocklab.schemas import PeriodicBox, Scenario
 
 from .errors import RenderInputError
 

@@ -1,4 +1,4 @@
-"""`python -m service.render.worker`: draw one picture or movie in a child process.
+"""`python -m flocklab.service.render.worker`: draw one picture or movie in a child process.
 
 The service runs this per render request (then caches the file), so the API process never
 imports matplotlib, h5py's big reads or the engine's helpers, and a slow 10^6-agent draw

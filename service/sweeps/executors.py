@@ -23,13 +23,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
-from schemas import Scenario
-from schemas.sweep import SweepRun
+from flocklab.schemas import Scenario
+from flocklab.schemas.sweep import SweepRun
 
 from ..execute import execute_to_dir
 
 if TYPE_CHECKING:
-    from kernels import RunResult
+    from flocklab.kernels import RunResult
 
 # Runs handed to the engine at once (the batch it may fuse into one launch); smaller
 # batches report and resume at a finer grain. FLOCKLAB_SWEEP_BATCH_RUNS sets it.
@@ -80,7 +80,7 @@ class LocalExecutor:
         if keep == "all":
             self._with_artifacts(runs, out_dir, on_result, should_stop)
             return
-        import kernels
+        from flocklab import kernels
 
         for start in range(0, len(runs), BATCH_RUNS):
             if should_stop():
@@ -107,7 +107,7 @@ class LocalExecutor:
             on_result(run, result)
 
     def probe(self, scenario: Scenario) -> RunResult:
-        import kernels
+        from flocklab import kernels
 
         return kernels.run(scenario)
 

@@ -6,8 +6,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-
-from schemas.sweep import Measure
+from flocklab.schemas.sweep import Measure
 
 
 def reduce_run(m: Measure, observables: dict[str, np.ndarray], tolerance: float) -> float | None:
@@ -23,7 +22,7 @@ def reduce_run(m: Measure, observables: dict[str, np.ndarray], tolerance: float)
     if len(v) == 0:
         return None
     if m.reduce == "converge_time":
-        from kernels.engine import time_to_converge  # the engine's own definition
+        from flocklab.kernels.engine import time_to_converge  # the engine's own definition
 
         tol = m.tolerance if m.tolerance is not None else tolerance
         return time_to_converge(observables["time"][window], v, tol)

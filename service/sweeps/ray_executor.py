@@ -30,14 +30,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from schemas import Scenario
-from schemas.sweep import SweepRun
+from flocklab.schemas import Scenario
+from flocklab.schemas.sweep import SweepRun
 
 from . import ray_tasks
 from .executors import BATCH_RUNS, ExecutorConfig, ResultFn, StopFn
 
 if TYPE_CHECKING:
-    from kernels import RunResult
+    from flocklab.kernels import RunResult
 
 CONNECT_SECONDS = 5.0  # a cluster address that does not accept a connection in this is down
 WAIT_SECONDS = 0.2  # how often should_stop is asked while tasks run

@@ -14,11 +14,11 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from schemas import Scenario
-from schemas.sweep import SweepRun
+from flocklab.schemas import Scenario
+from flocklab.schemas.sweep import SweepRun
 
 if TYPE_CHECKING:
-    from kernels import RunResult
+    from flocklab.kernels import RunResult
 
 
 def _use_threads(threads: int) -> None:
@@ -41,7 +41,7 @@ def run_chunk(runs: list[SweepRun], keep: str, out_dir: str, threads: int
             if result is not None:
                 done.append((i, result))
         return done
-    import kernels
+    from flocklab import kernels
 
     results = kernels.run_batch([r.scenario for r in runs])
     return [(i, r) for i, r in enumerate(results) if r.status != "cancelled"]
@@ -50,7 +50,7 @@ def run_chunk(runs: list[SweepRun], keep: str, out_dir: str, threads: int
 def probe(scenario: Scenario, threads: int) -> RunResult:
     """One (tiny) run: the sweep runner learns which observables the model has."""
     _use_threads(threads)
-    import kernels
+    from flocklab import kernels
 
     return kernels.run(scenario)
 
@@ -59,6 +59,6 @@ def run_job(scenario: Scenario, out_dir: str, threads: int) -> dict[str, Any]:
     """A service job: the scenario's artifacts into out_dir (the attempt's folder under
     the service's results root, which every node must be able to write)."""
     _use_threads(threads)
-    from service.execute import execute_to_dir
+    from flocklab.service.execute import execute_to_dir
 
     return execute_to_dir(scenario, Path(out_dir))

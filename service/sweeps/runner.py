@@ -30,10 +30,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from flocklab.schemas import FieldError, Scenario
+from flocklab.schemas.sweep import Sweep, SweepError, SweepRun
 from pydantic import ValidationError
-
-from schemas import FieldError, Scenario
-from schemas.sweep import Sweep, SweepError, SweepRun
 
 from ..execute import run_summary
 from .executors import Executor, LocalExecutor
@@ -42,7 +41,7 @@ from .measures import reduce_run
 from .tables import SWEEP_FILE, atomic_write, axis_columns, write_tables
 
 if TYPE_CHECKING:
-    from kernels import RunResult
+    from flocklab.kernels import RunResult
 
 TABLE_INTERVAL = 10.0  # least seconds between table rewrites while a sweep runs
 

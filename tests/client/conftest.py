@@ -9,8 +9,7 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-
-from service.serve import ServerProcess
+from flocklab.service.serve import ServerProcess
 
 ENV = {
     "FLOCKLAB_WARMUP_PRESET": "",

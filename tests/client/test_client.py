@@ -15,9 +15,8 @@ import h5py
 import httpx
 import numpy as np
 import pytest
-
-import clients
-from schemas import Scenario
+from flocklab import clients
+from flocklab.schemas import Scenario
 
 from .conftest import LONG, scenario
 

@@ -9,8 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-
-from clients import (
+from flocklab.clients import (
     AsyncClient,
     Client,
     Conflict,
@@ -19,8 +18,8 @@ from clients import (
     SweepJob,
     UnprocessableEntity,
 )
-from schemas.status import SweepStatus
-from schemas.sweep import Sweep
+from flocklab.schemas.status import SweepStatus
+from flocklab.schemas.sweep import Sweep
 
 from .conftest import scenario
 

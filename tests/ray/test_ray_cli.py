@@ -51,7 +51,7 @@ def write(tmp: Path, doc: dict[str, Any]) -> Path:
 
 
 def sweep_cmd(spec: Path, out: Path, address: str | None) -> list[str]:
-    cmd = [sys.executable, "-m", "service.cli", "sweep", str(spec), "--out", str(out)]
+    cmd = [sys.executable, "-m", "flocklab", "sweep", str(spec), "--out", str(out)]
     return cmd + (["--executor", "ray", "--ray-address", address] if address else [])
 
 

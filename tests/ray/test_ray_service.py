@@ -13,8 +13,7 @@ from typing import Any
 
 import httpx
 import pytest
-
-from service.serve import ServerProcess
+from flocklab.service.serve import ServerProcess
 
 from ..service.conftest import TEST_ENV, _cleanup
 from ..service.svc_helpers import scenario, wait_for
@@ -99,8 +98,8 @@ def http(ray_server: ServerProcess) -> Iterator[httpx.Client]:
 
 def test_jobs_and_sweeps_run_on_the_cluster_with_the_local_bits(
         ray_server: ServerProcess, http: httpx.Client, tmp_path: Path):
-    from schemas.sweep import Sweep
-    from service.sweeps.runner import run_sweep
+    from flocklab.schemas.sweep import Sweep
+    from flocklab.service.sweeps.runner import run_sweep
 
     spec = sweep_spec()
     sweep_id = submit_sweep(http, spec)

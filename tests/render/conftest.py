@@ -9,8 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-
-from schemas import Scenario, get_preset
+from flocklab.schemas import Scenario, get_preset
 
 pytest.importorskip("matplotlib")
 
@@ -37,7 +36,7 @@ def preset_scenario(name: str, overrides: dict[str, Any]) -> Scenario:
 
 
 def run_to(folder: Path, scenario: Scenario) -> Path:
-    from service.execute import execute_to_dir
+    from flocklab.service.execute import execute_to_dir
 
     execute_to_dir(scenario, folder)
     return folder

@@ -11,12 +11,11 @@ import time
 import h5py
 import numpy as np
 import pytest
-
-from service.render.errors import RenderInputError
-from service.render.figure import new_figure, save
-from service.render.plots import draw_observables
-from service.render.run_data import RunData
-from service.render.snapshot import SnapshotOptions, draw_snapshot
+from flocklab.service.render.errors import RenderInputError
+from flocklab.service.render.figure import new_figure, save
+from flocklab.service.render.plots import draw_observables
+from flocklab.service.render.run_data import RunData
+from flocklab.service.render.snapshot import SnapshotOptions, draw_snapshot
 
 from .conftest import FAMILIES, assert_picture, read_image
 
@@ -136,8 +135,7 @@ def test_observables_plot_marks_convergence(runs, tmp_path):
 
 def test_movie_mp4_and_gif(runs, tmp_path):
     import imageio.v3 as iio
-
-    from service.render.movie import write_movie
+    from flocklab.service.render.movie import write_movie
 
     run = RunData(runs["formation_F1"])
     seen = []
@@ -162,7 +160,7 @@ def test_movie_mp4_and_gif(runs, tmp_path):
 def test_cli_render_and_its_errors(runs, tmp_path):
     folder = runs["vicsek"]
     out = tmp_path / "v.png"
-    cmd = [sys.executable, "-m", "service.cli", "render", str(folder), "--out", str(out),
+    cmd = [sys.executable, "-m", "flocklab", "render", str(folder), "--out", str(out),
            "--frame", "2", "--size", "400x300"]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
@@ -193,8 +191,8 @@ def test_trajectory_frames_are_in_agent_order(runs):
 
 def test_movie_frames_match_full_drawings(runs):
     """Blitting (axes drawn once, moving artists per frame) gives the full drawing."""
-    from service.render.movie import _movie_view
-    from service.render.snapshot import Scene
+    from flocklab.service.render.movie import _movie_view
+    from flocklab.service.render.snapshot import Scene
 
     run = RunData(runs["formation_F1"])
     opts = SnapshotOptions(320, 320, trails=2)

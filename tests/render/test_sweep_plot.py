@@ -9,11 +9,10 @@ import subprocess
 import sys
 
 import numpy as np
-
-from schemas import Scenario
-from service.render.figure import new_figure
-from service.render.plots import draw_sweep
-from service.render.run_data import is_sweep_dir, load_sweep
+from flocklab.schemas import Scenario
+from flocklab.service.render.figure import new_figure
+from flocklab.service.render.plots import draw_sweep
+from flocklab.service.render.run_data import is_sweep_dir, load_sweep
 
 from .conftest import assert_picture, read_image
 
@@ -29,7 +28,7 @@ def _scenario(eta: float, n: int, seed: int) -> Scenario:
 
 
 def test_sweep_plot_from_real_runs(tmp_path, taichi_cpu):
-    from service.execute import execute_to_dir
+    from flocklab.service.execute import execute_to_dir
 
     folder = tmp_path / "sweep"
     folder.mkdir()
@@ -67,7 +66,7 @@ def test_sweep_plot_from_real_runs(tmp_path, taichi_cpu):
     assert fig.get_suptitle() == "vicsek-eta: mean ± sem over replicas"
 
     out = tmp_path / "sweep.png"
-    r = subprocess.run([sys.executable, "-m", "service.cli", "render", str(folder), "--out",
+    r = subprocess.run([sys.executable, "-m", "flocklab", "render", str(folder), "--out",
                         str(out)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["measures"] == ["polarization"]

@@ -11,8 +11,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-
-from service.serve import ServerProcess
+from flocklab.service.serve import ServerProcess
 
 MiB = 2**20
 

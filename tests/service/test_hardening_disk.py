@@ -15,8 +15,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-
-from service.jobs.disk import free_bytes
+from flocklab.service.jobs.disk import free_bytes
 
 from .svc_helpers import assert_problem, long_scenario, scenario, submit, wait_for
 from .test_durability import _wait_running, _workers

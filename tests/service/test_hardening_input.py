@@ -15,10 +15,9 @@ from pathlib import Path
 import pytest
 import uvicorn
 from fastapi import FastAPI
-
-from kernels import runtime
-from service.app.problems import UnexpectedErrorMiddleware, install_problem_handlers
-from service.serve import free_port
+from flocklab.kernels import runtime
+from flocklab.service.app.problems import UnexpectedErrorMiddleware, install_problem_handlers
+from flocklab.service.serve import free_port
 
 from .svc_helpers import assert_problem, scenario, submit, wait_for
 from .test_durability import _workers

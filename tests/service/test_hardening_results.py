@@ -13,8 +13,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-
-from service.serve import free_port
+from flocklab.service.serve import free_port
 
 from .svc_helpers import assert_problem, long_scenario, scenario, submit, wait_for
 from .test_durability import _wait_running
@@ -106,7 +105,7 @@ def test_a_second_service_on_a_locked_data_dir_exits_1(make_server, tmp_path):
     data = tmp_path / "data"
     make_server(data_dir=data)
     second = subprocess.run(
-        [sys.executable, "-m", "service.serve", "--data-dir", str(data),
+        [sys.executable, "-m", "flocklab.service.serve", "--data-dir", str(data),
          "--port", str(free_port())], capture_output=True, text=True, timeout=120,
         env={"FLOCKLAB_WARMUP_PRESET": "", "PATH": "/usr/bin:/bin"})
     assert second.returncode == 1, second.stderr[-2000:]

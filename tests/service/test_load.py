@@ -6,7 +6,7 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-import clients
+from flocklab import clients
 
 from .svc_helpers import scenario
 

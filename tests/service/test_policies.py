@@ -18,7 +18,7 @@ from .svc_helpers import assert_problem, long_scenario, scenario, submit, wait_f
 @pytest.fixture(scope="module")
 def tight(tmp_path_factory):
     """Two queued jobs at most, results kept 2 s, 0.05 s between stop request and kill."""
-    from service.serve import ServerProcess
+    from flocklab.service.serve import ServerProcess
 
     from .conftest import TEST_ENV, _cleanup
 

@@ -10,8 +10,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
-
-import clients
+from flocklab import clients
 
 from .svc_helpers import assert_problem, long_scenario, scenario, submit, wait_for
 

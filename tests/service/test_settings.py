@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from service.app import load_settings
-from service.serve import cli_main
+from flocklab.service.app import load_settings
+from flocklab.service.serve import cli_main
 
 
 def test_defaults_need_no_configuration(monkeypatch, tmp_path):

@@ -6,8 +6,8 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-from service.jobs import JobStore, NewJob
-from service.jobs.results import ResultStore
+from flocklab.service.jobs import JobStore, NewJob
+from flocklab.service.jobs.results import ResultStore
 
 # The jobs table as the first release created it (before sweeps).
 OLD_SCHEMA = """

@@ -14,8 +14,7 @@ from typing import Any
 
 import httpx
 import pytest
-
-from service.serve import ServerProcess
+from flocklab.service.serve import ServerProcess
 
 from .conftest import TEST_ENV, _cleanup
 from .svc_helpers import assert_problem
@@ -83,9 +82,9 @@ def wait_sweep(http: httpx.Client, sweep_id: str, until: Any = None, timeout: fl
 
 
 def test_sweep_table_equals_the_local_runners(http: httpx.Client, tmp_path: Path):
-    from schemas.sweep import Sweep
-    from service.sweeps.runner import run_sweep
-    from service.sweeps.tables import read_table
+    from flocklab.schemas.sweep import Sweep
+    from flocklab.service.sweeps.runner import run_sweep
+    from flocklab.service.sweeps.tables import read_table
 
     spec = sweep_spec()
     created = submit(http, spec)

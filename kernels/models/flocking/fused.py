@@ -38,8 +38,7 @@ from typing import Any
 
 import numpy as np
 import taichi as ti
-
-from schemas import Scenario
+from flocklab.schemas import Scenario
 
 from ...batch import FusedBatch
 from ...space.cells import SPREAD, clear_cells, make_cell_sort

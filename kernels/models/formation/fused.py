@@ -31,9 +31,8 @@ from typing import Any
 
 import numpy as np
 import taichi as ti
-
-from schemas import Scenario
-from schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
+from flocklab.schemas import Scenario
+from flocklab.schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
 
 from ...batch import FusedBatch
 from ...space.cells import SPREAD

@@ -20,9 +20,8 @@ from typing import Any
 
 import numpy as np
 import taichi as ti
-
-from schemas import Scenario
-from schemas.formation import FormationParams, SaturatingF
+from flocklab.schemas import Scenario
+from flocklab.schemas.formation import FormationParams, SaturatingF
 
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged

@@ -15,9 +15,8 @@ import math
 from abc import ABC, abstractmethod
 
 import numpy as np
-
-from schemas.formation import Path as PathSpec
-from schemas.formation import SplinePath, StraightPath
+from flocklab.schemas.formation import Path as PathSpec
+from flocklab.schemas.formation import SplinePath, StraightPath
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
 _PIECES = 8  # quadrature sub-intervals per spline segment

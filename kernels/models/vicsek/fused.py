@@ -26,8 +26,7 @@ from typing import Any
 
 import numpy as np
 import taichi as ti
-
-from schemas import PeriodicBox, Scenario, VicsekParams
+from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
 from ...batch import FusedBatch
 from ...space import rng

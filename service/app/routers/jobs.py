@@ -10,10 +10,9 @@ from typing import Annotated
 
 from fastapi import APIRouter, Header, Query, Request
 from fastapi.responses import JSONResponse, StreamingResponse
+from flocklab.schemas import FieldError
+from flocklab.service.jobs import IdempotencyConflict, NewJob, QueueFull
 from starlette.concurrency import run_in_threadpool
-
-from schemas import FieldError
-from service.jobs import IdempotencyConflict, NewJob, QueueFull
 
 from ..admission import queue_full, queue_gauge
 from ..deps import HubDep, JobId, RuntimeDep, SettingsDep, get_job

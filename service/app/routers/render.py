@@ -22,10 +22,9 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, FastAPI, Query, Request
 from fastapi.responses import FileResponse
+from flocklab.schemas import FieldError
+from flocklab.service.jobs import Job
 from starlette.concurrency import run_in_threadpool
-
-from schemas import FieldError
-from service.jobs import Job
 
 from ..deps import JobId, RuntimeDep
 from ..problems import ProblemError, invalid
@@ -173,7 +172,7 @@ async def _draw(slots: asyncio.Semaphore, what: str, folder: Path, target: Path,
                           "options": options}).encode()
     async with slots:
         proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "service.render.worker", stdin=asyncio.subprocess.PIPE,
+            sys.executable, "-m", "flocklab.service.render.worker", stdin=asyncio.subprocess.PIPE,
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
             env={**os.environ, "MPLBACKEND": "Agg"})
         try:

@@ -16,11 +16,10 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Header, Query, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse, Response, StreamingResponse
+from flocklab.schemas.status import SweepList, SweepStatus
+from flocklab.service.jobs import IdempotencyConflict, Job, JobRuntime, NewJob, QueueFull
+from flocklab.service.sweeps.tables import read_table
 from starlette.concurrency import run_in_threadpool
-
-from schemas.status import SweepList, SweepStatus
-from service.jobs import IdempotencyConflict, Job, JobRuntime, NewJob, QueueFull
-from service.sweeps.tables import read_table
 
 from ..admission import queue_full, queue_gauge
 from ..deps import HubDep, RuntimeDep, SettingsDep, get_job
