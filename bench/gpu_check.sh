@@ -74,7 +74,7 @@ step() {
 # ---- prerequisites -------------------------------------------------------------------
 say "flocklab GPU check: backend=$BACKEND dry_run=$DRY smoke=$SMOKE $(date -u +%FT%TZ)"
 say "git: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)  host: $(hostname)"
-if ! "$PY" -c "import kernels, service, taichi" 2>> "$LOG"; then
+if ! "$PY" -c "import flocklab.kernels, flocklab.service, taichi" 2>> "$LOG"; then
     say "prerequisite missing: install the project first (pip install -e '.[dev]')"
     exit 2
 fi

@@ -5,11 +5,14 @@
   a 200-frame MP4 of 10^4 agents                bar: < 60 s
 
 Each case first runs a small Vicsek scenario into a temporary folder (not timed), then
-times `flocklab render` twice: the whole command in a fresh process (`cli_seconds`,
-including Python, matplotlib and h5py start-up) and the drawing and writing alone inside
-this process (`render_seconds`).
+times `flocklab render` REPEAT times each way: the whole command in a fresh process, as
+the `flocklab` console script runs it (`service.entry`; `cli_seconds` wall and
+`cli_cpu_seconds` user + system, including Python, matplotlib and h5py start-up), and the
+drawing and writing alone inside this process (`render_seconds`). Medians are printed,
+with the load average around the case: on a shared machine the wall time follows the
+load, the CPU time much less.
 
-    python bench/render_bench.py [--keep DIR]
+    python bench/render_bench.py [--keep DIR] [--repeat R] [--only CASE]
 """
 
 from __future__ import annotations
@@ -17,6 +20,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -48,6 +54,9 @@ CASES = [
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--keep", type=Path, help="keep the runs and pictures in this folder")
+    p.add_argument("--repeat", type=int, default=3, help="timings per case (medians)")
+    p.add_argument("--only", choices=[c[0] for c in CASES], action="append",
+                   help="run only this case (repeatable)")
     args = p.parse_args()
     from flocklab.service.execute import execute_to_dir
     from flocklab.service.render.cli import add_arguments, render
@@ -55,23 +64,42 @@ def main() -> None:
     root = args.keep or Path(tempfile.mkdtemp(prefix="render-bench-"))
     root.mkdir(parents=True, exist_ok=True)
     for name, sc, extra, bar in CASES:
+        if args.only and name not in args.only:
+            continue
         folder = root / name
         if not folder.exists():
             execute_to_dir(sc, folder)
         out = root / (f"{name}.mp4" if "--movie" in extra else f"{name}.png")
         argv = [str(folder), "--out", str(out), *extra]
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "flocklab", "render", *argv], check=True,
-                       capture_output=True)
-        cli = time.perf_counter() - t0
-        parser = argparse.ArgumentParser()
-        add_arguments(parser)
-        t0 = time.perf_counter()
-        drawn = render(parser.parse_args(argv))
-        inner = time.perf_counter() - t0
-        print(json.dumps({"case": name, "N": sc.n_agents, "cli_seconds": round(cli, 2),
-                          "render_seconds": round(inner, 2), "bar_seconds": bar,
-                          "within_bar": cli < bar, "drawn": drawn}), flush=True)
+        load_before = os.getloadavg()[0]
+        walls, cpus, inners = [], [], []
+        for _ in range(args.repeat):
+            used = _children_cpu()
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "flocklab.service.entry", "render", *argv],
+                           check=True, capture_output=True)
+            walls.append(time.perf_counter() - t0)
+            cpus.append(_children_cpu() - used)
+            parser = argparse.ArgumentParser()
+            add_arguments(parser)
+            t0 = time.perf_counter()
+            drawn = render(parser.parse_args(argv))
+            inners.append(time.perf_counter() - t0)
+        cli = statistics.median(walls)
+        print(json.dumps({"case": name, "N": sc.n_agents, "repeat": args.repeat,
+                          "cli_seconds": round(cli, 2),
+                          "cli_cpu_seconds": round(statistics.median(cpus), 2),
+                          "render_seconds": round(statistics.median(inners), 2),
+                          "cli_seconds_all": [round(t, 2) for t in walls],
+                          "bar_seconds": bar, "within_bar": cli < bar,
+                          "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+                          "drawn": drawn}), flush=True)
+
+
+def _children_cpu() -> float:
+    """User + system seconds of the finished child processes so far."""
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
 
 
 if __name__ == "__main__":

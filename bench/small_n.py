@@ -50,10 +50,9 @@ def vicsek_scenario(n: int, L: float, eta: float, steps: int, seed: int = 1,
 
 
 def single(sizes: list[int], steps: int) -> None:
+    from bench import ckdtree_vicsek
     from flocklab import kernels
     from flocklab.schemas import Scenario
-
-    from bench import ckdtree_vicsek
 
     for n, chosen in ((n, c) for n in sizes for c in (None, ["polarization"])):
         L = math.sqrt(n / 4.0)

@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import base64
 import io
+import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
+
 from flocklab.schemas import Scenario
 
 DEFAULT_URL = "http://127.0.0.1:8000"
@@ -90,6 +92,45 @@ def _agents(agents: slice | Sequence[int] | str) -> str:
             parts.append(str(int(agents.step)))
         return ":".join(parts)
     return ",".join(str(int(i)) for i in agents)
+
+
+def wait_params(wait: float, until: str) -> dict[str, Any] | None:
+    """Query of a long-poll GET: `until` is "finished" (the server's default) or "change"."""
+    if until not in ("finished", "change"):
+        raise ValueError(f"until must be 'finished' or 'change', not {until!r}")
+    if wait <= 0:
+        return None
+    return {"wait": wait} if until == "finished" else {"wait": wait, "until": until}
+
+
+def page_size_for(limit: int | None, page_size: int) -> int:
+    if limit is not None and limit < 1:
+        raise ValueError("limit must be at least 1 (None: every job)")
+    return page_size if limit is None else min(page_size, limit)
+
+
+class SSEParser:
+    """Server-Sent Events from lines of text: `feed(line)` yields (event, data) at each
+    blank line that ends an event; comments (keep-alives) are skipped."""
+
+    def __init__(self) -> None:
+        self.event: str = "message"
+        self.data: list[str] = []
+
+    def feed(self, line: str) -> Iterator[tuple[str, Any]]:
+        if line == "":
+            if self.data:
+                yield self.event, json.loads("\n".join(self.data))
+            self.event, self.data = "message", []
+        elif line.startswith(":"):
+            return
+        else:
+            field, _, value = line.partition(":")
+            value = value.removeprefix(" ")
+            if field == "event":
+                self.event = value
+            elif field == "data":
+                self.data.append(value)
 
 
 def load_npz(content: bytes) -> dict[str, np.ndarray]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
 from flocklab.schemas.status import SweepStatus
 from flocklab.schemas.sweep import Sweep
 

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
+
 from flocklab.schemas import Scenario
 from flocklab.schemas.status import SweepStatus
 from flocklab.schemas.sweep import Sweep
@@ -73,16 +74,21 @@ class AsyncClient:
         return AsyncJob(self, (await self.request("GET", f"/v1/jobs/{job_id}")).json())
 
     async def jobs(self, status: str | Sequence[str] | None = None, model: str | None = None,
-                   page_size: int = 100) -> AsyncIterator[AsyncJob]:
-        params: dict[str, Any] = {"limit": page_size}
+                   page_size: int = 100, limit: int | None = None
+                   ) -> AsyncIterator[AsyncJob]:
+        params: dict[str, Any] = {"limit": _core.page_size_for(limit, page_size)}
         if status is not None:
             params["status"] = [status] if isinstance(status, str) else list(status)
         if model is not None:
             params["model"] = model
+        count = 0
         while True:
             page = (await self.request("GET", "/v1/jobs", params=params)).json()
             for item in page["items"]:
                 yield AsyncJob(self, item)
+                count += 1
+                if limit is not None and count >= limit:
+                    return
             if not page["next_cursor"]:
                 return
             params["cursor"] = page["next_cursor"]
@@ -130,9 +136,9 @@ class AsyncJob(_core.JobState):
         self.client = client
         self.data = data
 
-    async def refresh(self, wait: float = 0.0) -> AsyncJob:
-        params = {"wait": wait} if wait > 0 else None
-        r = await self.client.request("GET", f"/v1/jobs/{self.id}", params=params,
+    async def refresh(self, wait: float = 0.0, until: str = "finished") -> AsyncJob:
+        r = await self.client.request("GET", f"/v1/jobs/{self.id}",
+                                      params=_core.wait_params(wait, until),
                                       timeout=self.client.timeout + wait)
         self.data = r.json()
         return self
@@ -141,6 +147,7 @@ class AsyncJob(_core.JobState):
                    ) -> AsyncJob:
         deadline = None if timeout is None else time.monotonic() + timeout
         bar = _core.ProgressBar(progress)
+        until = "change" if bar.enabled else "finished"
         try:
             bar.update(self)
             while not self.done:
@@ -148,11 +155,27 @@ class AsyncJob(_core.JobState):
                     deadline - time.monotonic())
                 if remaining <= 0:
                     raise JobTimeout(f"job {self.id} still {self.status} after {timeout} s")
-                await self.refresh(wait=min(_core.LONG_POLL_SECONDS, remaining))
+                await self.refresh(wait=min(_core.LONG_POLL_SECONDS, remaining), until=until)
                 bar.update(self)
         finally:
             bar.close()
         return self
+
+    async def events(self) -> AsyncIterator[dict[str, Any]]:
+        """The asynchronous twin of `Job.events()`."""
+        parser = _core.SSEParser()
+        async with self.client.http.stream("GET", f"/v1/jobs/{self.id}/events",
+                                           headers={"Accept": "text/event-stream"}) as r:
+            if r.status_code >= 400:
+                await r.aread()
+                raise_for_status(r)
+            async for line in r.aiter_lines():
+                for event, data in parser.feed(line):
+                    if event == "job":
+                        self.data = data
+                        yield data
+                    elif event in ("end", "shutdown"):
+                        return
 
     async def cancel(self) -> AsyncJob:
         self.data = (await self.client.request("POST", f"/v1/jobs/{self.id}/cancel")).json()
@@ -214,9 +237,9 @@ class AsyncSweepJob:
         s = self.state
         return f"<AsyncSweepJob {s.id} {s.status} {s.runs_done}/{s.runs_total} runs>"
 
-    async def status(self, wait: float = 0.0) -> SweepStatus:
-        params = {"wait": wait} if wait > 0 else None
-        r = await self.client.request("GET", f"/v1/sweeps/{self.id}", params=params,
+    async def status(self, wait: float = 0.0, until: str = "finished") -> SweepStatus:
+        r = await self.client.request("GET", f"/v1/sweeps/{self.id}",
+                                      params=_core.wait_params(wait, until),
                                       timeout=self.client.timeout + wait)
         self.state = SweepStatus.model_validate(r.json())
         return self.state
@@ -225,6 +248,7 @@ class AsyncSweepJob:
                    ) -> np.ndarray:
         deadline = None if timeout is None else time.monotonic() + timeout
         bar = _core.ProgressBar(progress)
+        until = "change" if bar.enabled else "finished"  # a bar shows every run's end
         try:
             bar.update(self.state)  # type: ignore[arg-type]
             while not self.done:
@@ -233,7 +257,8 @@ class AsyncSweepJob:
                 if remaining <= 0:
                     raise JobTimeout(f"sweep {self.id} still {self.state.status} after "
                                      f"{timeout} s")
-                await self.status(wait=min(_core.LONG_POLL_SECONDS, remaining))
+                await self.status(wait=min(_core.LONG_POLL_SECONDS, remaining),
+                                  until=until)
                 bar.update(self.state)  # type: ignore[arg-type]
         finally:
             bar.close()

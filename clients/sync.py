@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
+
 from flocklab.schemas import Scenario
 from flocklab.schemas.status import SweepStatus
 from flocklab.schemas.sweep import Sweep
@@ -79,17 +80,21 @@ class Client:
         return Job(self, self.request("GET", f"/v1/jobs/{job_id}").json())
 
     def jobs(self, status: str | Sequence[str] | None = None, model: str | None = None,
-             page_size: int = 100) -> Iterator[Job]:
-        """Every job, newest first, fetched a page at a time."""
-        params: dict[str, Any] = {"limit": page_size}
+             page_size: int = 100, limit: int | None = None) -> Iterator[Job]:
+        """Jobs newest first, fetched a page at a time: every one, or the first `limit`."""
+        params: dict[str, Any] = {"limit": _core.page_size_for(limit, page_size)}
         if status is not None:
             params["status"] = [status] if isinstance(status, str) else list(status)
         if model is not None:
             params["model"] = model
+        count = 0
         while True:
             page = self.request("GET", "/v1/jobs", params=params).json()
             for item in page["items"]:
                 yield Job(self, item)
+                count += 1
+                if limit is not None and count >= limit:
+                    return
             if not page["next_cursor"]:
                 return
             params["cursor"] = page["next_cursor"]
@@ -149,10 +154,11 @@ class Job(_core.JobState):
         self.client = client
         self.data = data
 
-    def refresh(self, wait: float = 0.0) -> Job:
-        """Re-read the job; with `wait`, long-poll until it changes or `wait` s pass."""
-        params = {"wait": wait} if wait > 0 else None
-        self.data = self.client.request("GET", f"/v1/jobs/{self.id}", params=params,
+    def refresh(self, wait: float = 0.0, until: str = "finished") -> Job:
+        """Re-read the job; with `wait`, long-poll until it has finished (`until=
+        "change"`: until it changes) or `wait` s pass."""
+        self.data = self.client.request("GET", f"/v1/jobs/{self.id}",
+                                        params=_core.wait_params(wait, until),
                                         timeout=self.client.timeout + wait).json()
         return self
 
@@ -160,10 +166,11 @@ class Job(_core.JobState):
         """Block until the job has finished; returns it (check `status`, `error`).
 
         Raises JobTimeout after `timeout` seconds. `progress` draws a bar on stderr
-        (default: when stderr is a terminal).
+        (default: when stderr is a terminal), which long-polls for each change.
         """
         deadline = None if timeout is None else time.monotonic() + timeout
         bar = _core.ProgressBar(progress)
+        until = "change" if bar.enabled else "finished"
         try:
             bar.update(self)
             while not self.done:
@@ -171,11 +178,29 @@ class Job(_core.JobState):
                     deadline - time.monotonic())
                 if remaining <= 0:
                     raise JobTimeout(f"job {self.id} still {self.status} after {timeout} s")
-                self.refresh(wait=min(_core.LONG_POLL_SECONDS, remaining))
+                self.refresh(wait=min(_core.LONG_POLL_SECONDS, remaining), until=until)
                 bar.update(self)
         finally:
             bar.close()
         return self
+
+    def events(self) -> Iterator[dict[str, Any]]:
+        """Follow the job's Server-Sent Events: yields the job (as a dict, also kept in
+        `data`) at each change, and ends once it has finished (or the server shuts down:
+        then `done` is still false)."""
+        parser = _core.SSEParser()
+        with self.client.http.stream("GET", f"/v1/jobs/{self.id}/events",
+                                     headers={"Accept": "text/event-stream"}) as r:
+            if r.status_code >= 400:
+                r.read()
+                raise_for_status(r)
+            for line in r.iter_lines():
+                for event, data in parser.feed(line):
+                    if event == "job":
+                        self.data = data
+                        yield data
+                    elif event in ("end", "shutdown"):
+                        return
 
     def cancel(self) -> Job:
         self.data = self.client.request("POST", f"/v1/jobs/{self.id}/cancel").json()
@@ -244,10 +269,11 @@ class SweepJob:
         s = self.state
         return f"<SweepJob {s.id} {s.status} {s.runs_done}/{s.runs_total} runs>"
 
-    def status(self, wait: float = 0.0) -> SweepStatus:
-        """Re-read the sweep; with `wait`, long-poll until it changes or `wait` s pass."""
-        params = {"wait": wait} if wait > 0 else None
-        r = self.client.request("GET", f"/v1/sweeps/{self.id}", params=params,
+    def status(self, wait: float = 0.0, until: str = "finished") -> SweepStatus:
+        """Re-read the sweep; with `wait`, long-poll until it has finished (`until=
+        "change"`: until it changes) or `wait` s pass."""
+        r = self.client.request("GET", f"/v1/sweeps/{self.id}",
+                                params=_core.wait_params(wait, until),
                                 timeout=self.client.timeout + wait)
         self.state = SweepStatus.model_validate(r.json())
         return self.state
@@ -261,6 +287,7 @@ class SweepJob:
         """
         deadline = None if timeout is None else time.monotonic() + timeout
         bar = _core.ProgressBar(progress)
+        until = "change" if bar.enabled else "finished"  # a bar shows every run's end
         try:
             bar.update(self.state)  # type: ignore[arg-type]
             while not self.done:
@@ -269,7 +296,7 @@ class SweepJob:
                 if remaining <= 0:
                     raise JobTimeout(f"sweep {self.id} still {self.state.status} after "
                                      f"{timeout} s")
-                self.status(wait=min(_core.LONG_POLL_SECONDS, remaining))
+                self.status(wait=min(_core.LONG_POLL_SECONDS, remaining), until=until)
                 bar.update(self.state)  # type: ignore[arg-type]
         finally:
             bar.close()

@@ -15,6 +15,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 import numpy as np
+
 from flocklab.schemas import Scenario
 
 from .result import FrameSink, RunResult

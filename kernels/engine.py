@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
+
 from flocklab.schemas import Scenario
 
 from . import batch, runtime

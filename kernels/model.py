@@ -13,6 +13,7 @@ from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 import numpy as np
+
 from flocklab.schemas import Scenario
 
 from .runtime import DevicePolicy

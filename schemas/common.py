@@ -246,6 +246,16 @@ class Recording(Strict):
         "degree_*, isolated) and the heading spread unless they are named. Supported by "
         "the models that declare their observables (vicsek).",
     )
+    precision: Literal["float64", "float32"] = Field(
+        default="float64", description="Floating-point type of the recorded frames in the "
+        "H5MD file: float32 halves a large trajectory (positions keep about 7 significant "
+        "digits); the run itself is always float64.",
+    )
+    compression: Literal["none", "gzip"] = Field(
+        default="none", description="Compress the recorded frames in the H5MD file (gzip "
+        "level 4 with HDF5's shuffle filter, which every HDF5 reader decodes): smaller "
+        "files, slower writes and reads.",
+    )
 
     @property
     def enabled(self) -> bool:

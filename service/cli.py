@@ -1,13 +1,16 @@
 """The `flocklab` command: run, sweep, validate, models, presets, serve.
 
 Exit codes: 0 success; 1 the run diverged or was interrupted; 2 bad input (invalid
-scenario, unreadable file, unknown preset); 3 the requested backend is unavailable.
+scenario, unreadable file, unknown preset); 3 the requested backend is unavailable;
+4 the command needs an extra that is not installed (`engine` for run and sweep, `service`
+for serve: service/cli_extras.py).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import signal
 import sys
@@ -16,6 +19,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+from pydantic import ValidationError
 
 from flocklab.schemas import (
     PRESETS,
@@ -30,7 +35,9 @@ from flocklab.schemas.paths import PathError, parse_assignment, set_path
 from flocklab.schemas.sweep import Sweep, SweepError, describe_sweep, is_sweep_document, load_sweep
 from flocklab.schemas.sweep_presets import SWEEP_PRESETS
 from flocklab.schemas.vicsek_presets import DEFAULT_PRESET
-from pydantic import ValidationError
+
+from .cli_extras import EXIT_MISSING_EXTRA, MissingExtra, require_extras, version
+from .cli_models import model_details, print_model
 
 EXIT_OK, EXIT_RUN_FAILED, EXIT_BAD_INPUT, EXIT_BACKEND = 0, 1, 2, 3
 
@@ -146,10 +153,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .execute import execute_to_dir
 
     show = sys.stderr.isatty() and not args.quiet
+    stop = _StopOnInterrupt()  # Ctrl-C stops between steps; what was computed is kept
     try:
-        summary = execute_to_dir(
-            scenario, Path(args.out), on_progress=ProgressBar(show), overwrite=args.overwrite
-        )
+        with stop:
+            summary = execute_to_dir(
+                scenario, Path(args.out), on_progress=ProgressBar(show), should_stop=stop,
+                overwrite=args.overwrite, stopped_status="interrupted",
+            )
     except FileExistsError as exc:
         raise BadInput(f"{exc}; pass --overwrite to replace it") from exc
     except BackendUnavailable as exc:
@@ -160,6 +170,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(json.dumps({"out": str(args.out), **brief}))
     if summary["status"] == "diverged":
         print(f"flocklab: run diverged: {summary['error']['message']}", file=sys.stderr)
+        return EXIT_RUN_FAILED
+    if summary["status"] == "interrupted":
+        print(f"flocklab: interrupted at step {summary['steps']} of {scenario.time.steps}: "
+              f"the {summary['frames']} frame(s) and the observables so far are in "
+              f"{args.out} (status interrupted)", file=sys.stderr)
         return EXIT_RUN_FAILED
     return EXIT_OK
 
@@ -253,6 +268,10 @@ def cmd_validate(args: argparse.Namespace) -> int:
         scenario = _validated(source, data)
     print(f"{source}: valid ({scenario.model.kind}, N = {scenario.n_agents}, "
           f"{scenario.time.steps} steps, {scenario.n_frames} frames)")
+    if scenario.n_frames == 0:
+        print(f"flocklab: warning: {source} records no frames (recording.every is 0): the "
+              "run keeps its observables but no trajectory; set recording.every = k to "
+              "record a frame every k steps", file=sys.stderr)
     return EXIT_OK
 
 
@@ -268,22 +287,27 @@ def _validate_sweep(source: str, data: Any) -> int:
 
 def cmd_models(args: argparse.Namespace) -> int:
     catalog = describe_models()
+    if args.name is not None:
+        return _one_model(catalog, args.name, as_json=args.json)
     if args.json:  # the models, then the sweep file's schema (kind "sweep")
         print(json.dumps([*catalog, describe_sweep()], indent=2))
         return EXIT_OK
     for m in catalog:
-        print(f"{m['kind']}: {m['summary']}")
-        print(f"  paper: {m['paper']}")
-        print(f"  equations: {m['equations']}")
-        print(f"  neighbourhood: |r_ij| {'<=' if m['paper_inclusive'] else '<'} radius "
-              f"(paper's choice); state: {', '.join(m['state'])}")
-        note = f" ({m['dimensions_note']})" if m["dimensions_note"] else ""
-        print(f"  dimensions: {', '.join(map(str, m['dimensions']))}{note}")
-        print("  parameters:")
-        for p in m["parameters"]:
-            default = "required" if p["required"] else f"default {_fmt(p['default'])}"
-            print(f"    {p['name']} ({default}): {p['description']}")
+        print_model(m)
         print()
+    print("one model: flocklab models NAME; references: docs/REFERENCES.md")
+    return EXIT_OK
+
+
+def _one_model(catalog: list[dict[str, Any]], name: str, *, as_json: bool) -> int:
+    found = [m for m in catalog if m["kind"] == name]
+    if not found:
+        raise BadInput(f"unknown model {name!r}; known: "
+                       f"{', '.join(m['kind'] for m in catalog)}")
+    if as_json:
+        print(json.dumps({**found[0], **model_details(name)}, indent=2))
+    else:
+        print_model(found[0])
     return EXIT_OK
 
 
@@ -311,14 +335,11 @@ def cmd_serve(args: argparse.Namespace, rest: list[str]) -> int:
     return cli_main(rest)
 
 
-def _fmt(v: Any) -> str:
-    return json.dumps(v) if not isinstance(v, str) else v
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="flocklab", description="Published flocking and formation models at scale."
     )
+    parser.add_argument("--version", action="version", version=f"flocklab {version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a scenario and write its artifacts to a folder")
     p.add_argument("scenario", nargs="?", default=f"preset:{DEFAULT_PRESET}",
@@ -353,6 +374,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "preset:NAME")
     p.set_defaults(fn=cmd_validate)
     p = sub.add_parser("models", help="list the models, their parameters and equations")
+    p.add_argument("name", nargs="?", help="show only this model (a kind, e.g. vicsek)")
     p.add_argument("--json", action="store_true", help="machine-readable catalog")
     p.set_defaults(fn=cmd_models)
     p = sub.add_parser("presets", help="list the paper presets, or print one as JSON")
@@ -372,17 +394,25 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser()
-    if argv and argv[0] == "serve":
-        return cmd_serve(argparse.Namespace(), argv[1:])
-    args = parser.parse_args(argv)
     try:
+        if argv and argv[0] == "serve":
+            require_extras("serve")
+            return cmd_serve(argparse.Namespace(), argv[1:])
+        args = parser.parse_args(argv)
+        require_extras(args.command)
         return args.fn(args)
+    except MissingExtra as exc:
+        print(f"flocklab: {exc}", file=sys.stderr)
+        return EXIT_MISSING_EXTRA
     except BadInput as exc:
         print(f"flocklab: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("flocklab: interrupted", file=sys.stderr)
         return EXIT_RUN_FAILED
+    except BrokenPipeError:  # `flocklab models | head`: the reader left, not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
 
 
 if __name__ == "__main__":

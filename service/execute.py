@@ -7,7 +7,9 @@ The folder holds:
   trajectory.h5     recorded frames and observables in H5MD (see service/h5md.py)
 Everything is written into a hidden sibling folder first and renamed into place at the
 end, so the target is either complete or absent; a run that blows up still lands, with
-status "diverged" and the frames recorded before the blow-up.
+status "diverged" and the frames recorded before the blow-up, and so does a run stopped
+through `should_stop` (status "cancelled", or the caller's `stopped_status`: the CLI's
+Ctrl-C gives "interrupted"), with the frames and observables up to the stop.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
 from flocklab.schemas import Scenario
 
 if TYPE_CHECKING:
@@ -56,9 +59,11 @@ def execute_to_dir(
     should_stop: Callable[[], bool] | None = None,
     overwrite: bool = False,
     on_result: Callable[[RunResult], None] | None = None,
+    stopped_status: str = "cancelled",
 ) -> dict[str, Any]:
     """Run `scenario` and write its artifacts to `out_dir`. Returns the summary dict;
-    `on_result` gets the engine's result before the folder is moved into place."""
+    `on_result` gets the engine's result before the folder is moved into place. A run
+    that `should_stop` ended is written with status `stopped_status`."""
     from flocklab import kernels  # the engine: only where a simulation runs
 
     from .h5md import H5MDWriter
@@ -81,6 +86,8 @@ def execute_to_dir(
             writer.close()
         write_observables_csv(tmp / "observables.csv", result.observables)
         summary = run_summary(scenario, result, frames=writer.frames, files=list(ARTIFACTS))
+        if summary["status"] == "cancelled":
+            summary["status"] = stopped_status
         if on_result is not None:
             on_result(result)
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))

@@ -38,6 +38,7 @@ def cli_main(argv: list[str]) -> int:
     """Parse `argv` (the arguments after `serve`), serve until interrupted, return 0."""
     args = build_parser().parse_args(argv)
     import uvicorn
+
     from flocklab.service.app import create_app, load_settings
     from flocklab.service.app.connections import (
         ConnectionLimits,

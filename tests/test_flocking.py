@@ -9,13 +9,13 @@ import time
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from pydantic import ValidationError
+from scipy.sparse.csgraph import connected_components
+
 from flocklab import kernels
 from flocklab.kernels.models.flocking.topology import build_edges, to_csr
 from flocklab.schemas import PRESETS, Scenario
 from flocklab.schemas.flocking import GraphSpec
-from pydantic import ValidationError
-from scipy.sparse.csgraph import connected_components
-
 from tests import test_flocking_reference as reference
 from tests.test_flocking_reference import (
     fused_or_skip,

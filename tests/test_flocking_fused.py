@@ -6,11 +6,11 @@ agrees with the per-step path; the engine picks the path from the scenario alone
 
 import numpy as np
 import pytest
+
 from flocklab import kernels
 from flocklab.kernels import engine
 from flocklab.kernels.models.flocking import fused as flocking_fused
 from flocklab.schemas import Scenario
-
 from tests.test_flocking_reference import lattice, m2_scenario, m3_scenario
 
 

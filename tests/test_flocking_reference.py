@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from flocklab import kernels
 from flocklab.kernels.model import all_kernels
 from flocklab.kernels.models.flocking.fused import FlockingBatch

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
+
 from flocklab import kernels
 from flocklab.kernels.models.formation.path import make_path
 from flocklab.kernels.models.formation.props import at_leader, d2_isolated, d3_holds, roots
@@ -13,7 +15,6 @@ from flocklab.kernels.models.formation.schedule import OffsetSchedule
 from flocklab.kernels.models.formation.shapes import named_offsets
 from flocklab.schemas import Scenario
 from flocklab.schemas.formation import FormationChange, NamedFormation, SplinePath
-from pydantic import ValidationError
 
 D = 20.0
 

@@ -4,10 +4,10 @@ scenario alone. (The plane is M4's only space.)"""
 
 import numpy as np
 import pytest
+
 from flocklab import kernels
 from flocklab.kernels import engine
 from flocklab.kernels.models.formation.fused import MAX_N, FormationBatch
-
 from tests.test_formation import STRAIGHT, explicit, scenario
 
 SPLINE = {"kind": "spline", "waypoints": [[0.0, 60.0], [-50.0, 50.0]], "arrival_time": 2.0}

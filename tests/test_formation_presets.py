@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from flocklab import kernels
 from flocklab.schemas import get_preset
 

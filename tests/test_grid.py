@@ -5,9 +5,9 @@ from functools import cache
 import numpy as np
 import pytest
 import taichi as ti
+
 from flocklab.kernels.runtime import DevicePolicy
 from flocklab.kernels.space.grid import Grid, make_visitor, permute_rows, within
-
 from tests.reference import adjacency
 
 nd = ti.types.ndarray()
@@ -175,9 +175,10 @@ def test_build_is_deterministic(taichi_cpu):
 @pytest.mark.parametrize("L", [None, 8.0, 2.5, 3.0])
 def test_half_stencil_graph_matches_brute_force(taichi_cpu, inclusive, L):
     """Degrees and component count from the half-stencil union-find pass."""
+    from scipy.sparse.csgraph import connected_components
+
     from flocklab.kernels.space.graph import MetricGraph
     from flocklab.kernels.space.state import SortedState
-    from scipy.sparse.csgraph import connected_components
 
     rng = np.random.default_rng(10)
     r = 0.5

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 import taichi as ti
-from flocklab import kernels
-from flocklab.schemas import PRESETS, Scenario
 from pydantic import ValidationError
 from scipy.optimize import brentq
 from scipy.sparse.csgraph import connected_components
 
+from flocklab import kernels
+from flocklab.schemas import PRESETS, Scenario
 from tests import test_flocking_reference as reference
 from tests.test_flocking_reference import (
     fused_or_skip,

@@ -7,6 +7,8 @@ import pytest
 from flocklab.schemas import MODELS, PRESETS, Scenario, field_errors, get_preset, parse_json_strict
 from pydantic import ValidationError
 
+from flocklab.schemas import MODELS, PRESETS, Scenario, field_errors, get_preset, parse_json_strict
+
 GOOD = {
     "model": {"kind": "vicsek", "rule": "average"},
     "space": {"kind": "periodic", "L": 10},
@@ -127,6 +129,7 @@ def test_every_model_runs_reproducibly_on_every_available_backend(taichi_cpu):
     """Each registered model, through a preset of its own, cut to a few steps: the same seed
     gives the same frames bit for bit. GPU backends join when one is present."""
     import numpy as np
+
     from flocklab import kernels
     from flocklab.kernels import runtime
 
@@ -167,6 +170,8 @@ def test_jittered_lattice_start_keeps_agents_apart():
     from flocklab.kernels.space.initial import initial_state
     from scipy.spatial import cKDTree
 
+    from flocklab.kernels.space.initial import initial_state
+
     data = with_("initial", {"kind": "random", "N": 1600, "region": {
         "kind": "lattice", "low": [1, 1], "spacing": 0.2, "jitter": 0.3}})
     sc = Scenario.model_validate(data)
@@ -184,6 +189,8 @@ def test_jittered_lattice_start_keeps_agents_apart():
 def test_vicsek_noise_above_two_pi_is_refused():
     from flocklab.schemas.vicsek import VicsekParams
     from pydantic import ValidationError
+
+    from flocklab.schemas.vicsek import VicsekParams
 
     assert VicsekParams.model_validate({"eta": 2 * math.pi}).eta == 2 * math.pi
     with pytest.raises(ValidationError, match=r"less than or equal to 6\.28"):

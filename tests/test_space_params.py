@@ -3,6 +3,7 @@ device policy the grids are built with."""
 
 import numpy as np
 import pytest
+
 from flocklab.kernels.runtime import DevicePolicy
 from flocklab.kernels.space.params import Slots
 

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from flocklab.schemas.sweep import SweepError, load_sweep
 from flocklab.schemas.sweep_presets import SWEEP_PRESETS
 from flocklab.service.cli import main

@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 
 import pytest
+
 from flocklab.schemas import Scenario, get_preset
 from flocklab.schemas.paths import PathError, merge, parse_assignment, set_path
 from flocklab.schemas.sweep import MAX_RUNS, Sweep, SweepError, load_sweep, sweep_problems

@@ -4,10 +4,10 @@ import math
 
 import numpy as np
 import pytest
+
 from flocklab import kernels
 from flocklab.kernels.space import rng
 from flocklab.schemas import Scenario
-
 from tests.reference import vicsek_step
 
 
@@ -204,6 +204,7 @@ def test_graph_observables_match_brute_force(path, L):
 @pytest.mark.parametrize("spread", [0.0, 1e-6, 0.5, 3.0, 6.2])
 def test_bucketed_circular_spread_equals_the_sorted_one(taichi_cpu, spread):
     import taichi as ti
+
     from flocklab.kernels.models.vicsek.kernel import VicsekKernel
     from flocklab.kernels.space.observables import circular_spread
 

@@ -3,9 +3,9 @@ windows, and the same prefix when cancelled; the engine picks the path from the 
 
 import numpy as np
 import pytest
+
 from flocklab import kernels
 from flocklab.kernels import engine
-
 from tests.test_vicsek import Frames, scenario
 
 # A mix a sweep would batch together: different N, L, noise, steps and seeds.
@@ -101,8 +101,9 @@ def test_chosen_observables_are_the_same_numbers(taichi_cpu, monkeypatch, per_st
 
 
 def test_unknown_or_undeclared_observables_are_refused():
-    from flocklab.schemas import Scenario
     from pydantic import ValidationError
+
+    from flocklab.schemas import Scenario
 
     doc = scenario(N=20, L=5.0).model_dump(mode="json")
     doc["recording"]["observables"] = ["polarization", "energy"]

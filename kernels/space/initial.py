@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from flocklab.schemas import ExplicitInitial, PeriodicBox, Scenario
 
 

@@ -21,9 +21,10 @@ import logging
 import time
 from typing import Any
 
+from starlette.types import ASGIApp, Receive, Scope, Send
+
 from flocklab.service.jobs.disk import free_bytes
 from flocklab.service.jobs.problems import problem
-from starlette.types import ASGIApp, Receive, Scope, Send
 
 from .problems import PROBLEM_MEDIA_TYPE
 from .queue_gauge import QueueGauge

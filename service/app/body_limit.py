@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import json
 
-from flocklab.service.jobs.problems import problem
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from flocklab.service.jobs.problems import problem
 
 from .problems import PROBLEM_MEDIA_TYPE
 

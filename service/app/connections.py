@@ -32,8 +32,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import h11
-from flocklab.service.jobs.problems import problem
 from uvicorn.protocols.http.h11_impl import H11Protocol
+
+from flocklab.service.jobs.problems import problem
 
 log = logging.getLogger("flocklab.connections")
 

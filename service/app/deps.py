@@ -6,6 +6,7 @@ import uuid
 from typing import Annotated
 
 from fastapi import Depends, Path, Request
+
 from flocklab.service.jobs import Job, JobRuntime
 
 from .events import ChangeHub

@@ -12,11 +12,12 @@ from fastapi import Depends, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
+from pydantic.json_schema import models_json_schema
+from starlette.concurrency import run_in_threadpool
+
 from flocklab.schemas import Problem, Scenario
 from flocklab.schemas.sweep import Sweep
 from flocklab.service.jobs import JobRuntime
-from pydantic.json_schema import models_json_schema
-from starlette.concurrency import run_in_threadpool
 
 from .admission import AdmissionMiddleware
 from .auth import require_api_key

@@ -12,10 +12,11 @@ import os
 from pathlib import Path
 from typing import Literal
 
-from flocklab.service.jobs import Limits, SupervisorConfig
-from flocklab.service.sweeps.executors import ExecutorConfig
 from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from flocklab.service.jobs import Limits, SupervisorConfig
+from flocklab.service.sweeps.executors import ExecutorConfig
 
 MiB = 2**20
 GiB = 2**30

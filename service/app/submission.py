@@ -15,9 +15,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import pydantic_core
+from pydantic import ValidationError
+
 from flocklab.schemas import PRESETS, FieldError, Scenario, field_errors, parse_json_strict
 from flocklab.service.jobs import check_limits
-from pydantic import ValidationError
 
 from .problems import ProblemError, invalid
 from .settings import Settings

@@ -15,11 +15,12 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 import pydantic_core
+from pydantic import BaseModel, ValidationError
+
 from flocklab.schemas import FieldError, field_errors, parse_json_strict
 from flocklab.schemas.sweep import Sweep, SweepError
 from flocklab.schemas.sweep_presets import SWEEP_PRESETS
 from flocklab.service.jobs.sweep_limits import SweepLimitError, check_sweep
-from pydantic import BaseModel, ValidationError
 
 from .problems import ProblemError, invalid
 from .settings import Settings

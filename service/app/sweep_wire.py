@@ -5,11 +5,12 @@ from __future__ import annotations
 import json
 from typing import Annotated, Any
 
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
 from flocklab.schemas import Problem
 from flocklab.schemas.status import SweepStatus
 from flocklab.schemas.sweep import Sweep
 from flocklab.service.jobs import Job
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .wire import _checksums, _ts
 

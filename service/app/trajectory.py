@@ -18,6 +18,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+
 from flocklab.schemas import FieldError
 
 from .problems import ProblemError, invalid

@@ -6,9 +6,10 @@ import datetime as dt
 import json
 from typing import Annotated, Any, Literal
 
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
 from flocklab.schemas import Problem, Scenario
 from flocklab.service.jobs import Job
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Status = Literal["queued", "running", "succeeded", "failed", "cancelled", "timed_out"]
 

@@ -15,8 +15,11 @@ from flocklab.schemas import FieldError, Scenario
 
 # Components per agent of each recordable array.
 COMPONENTS = {"position": 2, "velocity": 2, "heading": 1}
-# Bytes per stored value: the engine may keep float32, but the estimate stays conservative.
-BYTES_PER_VALUE = 8
+# Bytes per stored value of the frames (`recording.precision`).
+BYTES_PER_VALUE = {"float64": 8, "float32": 4}
+# The periodic image (int32 x 2) that goes with each recorded position in a periodic box
+# (written when it is exact; counted whenever it may be, to stay conservative).
+IMAGE_BYTES = 8
 # Per-agent working set of the engine: state arrays double-buffered, the cell grid's
 # count/offset/sorted-index arrays and per-agent observables scratch. Measured peak RSS
 # growth by `python -m bench.bench` at N = 10^6: 130-140 B (Vicsek) to 370 B (M2/M3).
@@ -55,14 +58,18 @@ def recorded_components(scenario: Scenario) -> int:
 
 
 def trajectory_bytes(scenario: Scenario) -> int:
-    """Size of the recorded frames: frames x N x components x 8 bytes."""
-    return scenario.n_frames * scenario.n_agents * recorded_components(scenario) * BYTES_PER_VALUE
+    """Size of the recorded frames, uncompressed: frames x N x (components x the bytes of
+    `recording.precision`, plus the periodic image beside the positions)."""
+    per_agent = recorded_components(scenario) * BYTES_PER_VALUE[scenario.recording.precision]
+    if "position" in scenario.recording.arrays and scenario.space.kind == "periodic":
+        per_agent += IMAGE_BYTES
+    return scenario.n_frames * scenario.n_agents * per_agent
 
 
 def estimated_memory_bytes(scenario: Scenario) -> int:
     """Peak memory of a run: engine state plus one frame in flight (frames stream to disk)."""
     n = scenario.n_agents
-    frame = n * recorded_components(scenario) * BYTES_PER_VALUE
+    frame = n * recorded_components(scenario) * 8  # the engine hands frames over in float64
     return ENGINE_BASE_BYTES + n * ENGINE_BYTES_PER_AGENT + frame
 
 

@@ -30,6 +30,7 @@ from typing import Any
 
 from ..sweeps.executors import ExecutorConfig
 from .disk import free_bytes
+from .joblog import JobLog
 from .limits import Limits
 from .problems import problem
 from .results import ResultStore
@@ -98,7 +99,7 @@ class Supervisor:
         self.results = results
         self.config = config
         self.scratch_dir = scratch_dir
-        self.on_change = on_change
+        self.on_change = JobLog(store, on_change)  # logs each job's start and end
         self.owner = f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
         self._ctx = mp.get_context("spawn")
         self._workers: list[_Worker] = []

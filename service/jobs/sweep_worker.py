@@ -28,11 +28,12 @@ log = logging.getLogger("flocklab.worker")
 def run_sweep_order(order: dict[str, Any], conn: Connection,
                     should_stop: Callable[[], bool]) -> dict[str, Any]:
     """Re-validate and run one sweep attempt; every failure becomes a problem body."""
+    from pydantic import ValidationError
+
     from flocklab.kernels.result import BackendUnavailable
     from flocklab.schemas import field_errors
     from flocklab.schemas.sweep import Sweep, SweepError
     from flocklab.service.sweeps.runner import run_sweep
-    from pydantic import ValidationError
 
     token = order["token"]
     try:

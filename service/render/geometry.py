@@ -2,9 +2,12 @@
 (M3), the virtual leaders, their path and the formation offsets (M4).
 
 The fixed graphs and the formation offsets are rebuilt with the engine's own pure-numpy
-helpers (`kernels.topology`, `kernels.formation_*`), so the picture shows exactly what the
-run used. Importing them imports Taichi's Python module but never initialises it; the
-service draws in a child process, so the API process still never imports the engine.
+helpers (`kernels.models.flocking.topology`, `kernels.models.formation`), so the picture
+shows exactly what the run used. Importing them imports Taichi's Python module but never
+initialises it; the service draws in a child process, so the API process still never
+imports the engine. The metric graph needs neither the engine nor the validated scenario, and below
+`BRUTE_FORCE_MAX` agents not even scipy (whose import costs more than the search), so a
+Vicsek or switching-graph snapshot starts in a fraction of a second.
 """
 
 from __future__ import annotations
@@ -12,20 +15,44 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .run_data import RunData
+
+BRUTE_FORCE_MAX = 4096  # agents: all pairs in numpy blocks; above, scipy's k-d tree
+_BLOCK = 512  # rows of the pair-distance matrix at a time (16 MiB per temporary at 4096)
 
 
 def metric_edges(pos: np.ndarray, radius: float, inclusive: bool, box: float | None
                  ) -> np.ndarray:
-    """(E, 2) agent pairs i < j within the radius (minimum image in a periodic box)."""
+    """(E, 2) agent pairs i < j within the radius (minimum image in a periodic box),
+    sorted by (i, j)."""
+    if len(pos) <= BRUTE_FORCE_MAX:
+        return _all_pairs(pos, radius, inclusive, box)
+    from scipy.spatial import cKDTree
+
     tree = cKDTree(np.mod(pos, box), boxsize=box) if box is not None else cKDTree(pos)
     pairs = tree.query_pairs(radius, output_type="ndarray")
     if not inclusive and len(pairs):
         d = displacement(pos[pairs[:, 0]], pos[pairs[:, 1]], box)
         pairs = pairs[np.hypot(d[:, 0], d[:, 1]) < radius]
-    return pairs.reshape(-1, 2)
+    pairs = pairs.reshape(-1, 2)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+def _all_pairs(pos: np.ndarray, radius: float, inclusive: bool, box: float | None
+               ) -> np.ndarray:
+    n = len(pos)
+    found = []
+    for start in range(0, n, _BLOCK):
+        rows = np.arange(start, min(start + _BLOCK, n))
+        # only the columns j >= start: pairs with j < start were found by earlier blocks
+        d = displacement(pos[rows, None, :], pos[None, start:, :], box)
+        dist = np.hypot(d[..., 0], d[..., 1])
+        near = dist <= radius if inclusive else dist < radius
+        near &= np.arange(start, n)[None, :] > rows[:, None]  # each pair once, i < j
+        i, j = np.nonzero(near)
+        found.append(np.column_stack([rows[i], start + j]))
+    return np.concatenate(found).astype(np.int64) if found else np.zeros((0, 2), np.int64)
 
 
 def displacement(a: np.ndarray, b: np.ndarray, box: float | None) -> np.ndarray:
@@ -45,16 +72,15 @@ def interaction_edges(run: RunData, pos: np.ndarray) -> np.ndarray | None:
     `adaptive_radius.halvings` says whether any changed). Formation: the repulsion graph
     |r_ij| < d.
     """
-    model = run.scenario.model
-    if model.kind == "flocking" and model.topology == "fixed":
+    if run.kind == "flocking" and run.doc["model"].get("topology") == "fixed":
+        model = run.scenario.model
         from flocklab.kernels.models.flocking.topology import build_edges
 
         u, v = build_edges(model.graph, run.n_agents, run.scenario.seed)
         return np.column_stack([u, v]).astype(np.int64)
-    nb = run.scenario.neighbours
-    if nb is None:
+    if run.radius is None:
         return None
-    return metric_edges(pos, float(nb.radius), run.scenario.inclusive, run.box)
+    return metric_edges(pos, run.radius, run.inclusive, run.box)
 
 
 @dataclass
@@ -65,9 +91,9 @@ class Obstacles:
 
 
 def obstacles(run: RunData) -> Obstacles | None:
-    model = run.scenario.model
-    if model.kind != "flocking_obstacles":
+    if run.kind != "flocking_obstacles":
         return None
+    model = run.scenario.model
     return Obstacles(np.asarray(model.obstacles, dtype=np.float64).reshape(-1, 2),
                      [(d.center[0], d.center[1], d.radius) for d in model.discs],
                      tuple(model.destination))
@@ -83,9 +109,9 @@ class Leaders:
 
 
 def leaders(run: RunData, t: float) -> Leaders | None:
-    model = run.scenario.model
-    if model.kind != "formation":
+    if run.kind != "formation":
         return None
+    model = run.scenario.model
     from flocklab.kernels.models.formation.path import make_path
 
     obs = run.observables

@@ -68,7 +68,7 @@ def draw_observables(fig: Any, run: RunData, names: list[str] | None, width: int
                              xycoords=("data", "axes fraction"), fontsize=7, c="tab:red",
                              xytext=(3, 0), textcoords="offset points")
     axes[-1].set_xlabel("time")
-    fig.suptitle(f"{run.scenario.name or run.kind}: N = {run.n_agents}", fontsize=10)
+    fig.suptitle(f"{run.name}: N = {run.n_agents}", fontsize=10)
     fig.tight_layout()
     return names
 

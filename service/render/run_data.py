@@ -1,4 +1,10 @@
-"""A run folder (or a sweep folder) read back for drawing: no plotting library here."""
+"""A run folder (or a sweep folder) read back for drawing: no plotting library here.
+
+`scenario.json` is read as plain JSON for the facts every picture needs (model kind,
+N, box, neighbour radius): validating it with the pydantic schemas costs more start-up
+than drawing a 10^3-agent frame, so `RunData.scenario` (the validated model) is built
+only when an overlay needs the typed objects (fixed graphs, obstacles, formations).
+"""
 
 from __future__ import annotations
 
@@ -8,13 +14,20 @@ import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import h5py
 import numpy as np
-from flocklab.schemas import PeriodicBox, Scenario
 
 from .errors import RenderInputError
+
+if TYPE_CHECKING:
+    from flocklab.schemas import Scenario
+
+# Each model family's neighbourhood test when the scenario leaves `neighbours.inclusive`
+# unset: the models' `paper_inclusive` (tests/render check this table against schemas).
+PAPER_INCLUSIVE = {"vicsek": True, "flocking": False, "flocking_obstacles": True,
+                   "formation": False}
 
 
 @dataclass
@@ -38,27 +51,40 @@ class RunData:
             if not (self.folder / name).is_file():
                 raise RenderInputError(f"{self.folder} is not a run folder (no {name})")
         try:
-            self.scenario = Scenario.model_validate_json((self.folder / "scenario.json")
-                                                         .read_text())
+            self.doc: dict[str, Any] = json.loads((self.folder / "scenario.json").read_text())
             self.summary: dict[str, Any] = json.loads((self.folder / "summary.json").read_text())
-        except ValueError as exc:
-            raise RenderInputError(f"{self.folder}: unreadable run files: {exc}") from exc
-
-    # -- scenario facts -------------------------------------------------------------------
-
-    @property
-    def n_agents(self) -> int:
-        return self.scenario.n_agents
-
-    @property
-    def kind(self) -> str:
-        return self.scenario.model.kind
+            self.kind: str = self.doc["model"]["kind"]
+            self.n_agents: int = int(self.doc["initial"]["N"])
+            space = self.doc["space"]
+            self.box: float | None = float(space["L"]) if space["kind"] == "periodic" else None
+            self.name: str = self.doc.get("name") or self.kind
+            nb = self.doc.get("neighbours")
+            self.radius: float | None = float(nb["radius"]) if nb else None
+        except (ValueError, KeyError, TypeError) as exc:
+            raise RenderInputError(f"{self.folder}: unreadable run files: {exc!r}") from exc
 
     @property
-    def box(self) -> float | None:
-        """L of the periodic box, or None on the plane."""
-        space = self.scenario.space
-        return float(space.L) if isinstance(space, PeriodicBox) else None
+    def inclusive(self) -> bool:
+        """The neighbourhood test in force (`<=` when True): the scenario's, else the
+        paper's."""
+        chosen = (self.doc.get("neighbours") or {}).get("inclusive")
+        if chosen is not None:
+            return bool(chosen)
+        if self.kind in PAPER_INCLUSIVE:
+            return PAPER_INCLUSIVE[self.kind]
+        return self.scenario.inclusive  # a family this table does not know yet
+
+    @cached_property
+    def scenario(self) -> Scenario:
+        """The validated scenario, for the overlays that need the typed model."""
+        from pydantic import ValidationError
+
+        from flocklab.schemas import Scenario
+
+        try:
+            return Scenario.model_validate(self.doc)
+        except ValidationError as exc:
+            raise RenderInputError(f"{self.folder}: unreadable scenario.json: {exc}") from exc
 
     # -- observables ----------------------------------------------------------------------
 

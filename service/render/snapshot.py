@@ -111,7 +111,8 @@ class Scene:
                 edges = geometry.interaction_edges(run, fr.position)
                 if edges is not None:
                     edges_drawn = len(edges)
-                    a["edges"].set_segments(_edge_segments(fr.position, edges, run.box))
+                    a["edges"].set_data(*_polyline(_edge_segments(fr.position, edges,
+                                                                  run.box)))
             pos, u, v, colours = _arrow_data(run, fr, self.view)
             a["dots"].set_offsets(pos)
             a["dots"].set_color(colours)
@@ -134,7 +135,7 @@ class Scene:
                 a["offsets"].set_segments(np.stack(
                     [np.repeat(lead.leader[None, :], len(lead.targets), 0), lead.targets],
                     axis=1))
-        name = run.scenario.name or run.kind
+        name = run.name
         a["title"].set_text(f"{name}: N = {run.n_agents}, t = {fr.time:.4g} "
                             f"(step {fr.step})")
         return SnapshotInfo(k, fr.step, fr.time, self.mode, agents, edges_drawn, trails_drawn)
@@ -169,8 +170,9 @@ class Scene:
                 a["trails"] = ax.add_collection(LineCollection(
                     [], linewidths=0.8, alpha=0.55, zorder=1))
             if self.want_edges:
-                a["edges"] = ax.add_collection(LineCollection(
-                    [], colors="0.55", linewidths=0.6, zorder=2, alpha=0.8))
+                # one line broken by NaNs, not a LineCollection: thousands of edges would
+                # cost a Path object each (most of a 10^3-agent snapshot's drawing time)
+                (a["edges"],) = ax.plot([], [], c="0.55", lw=0.6, zorder=2, alpha=0.8)
             dot = 18 if n <= 50 else 6 if n <= 1000 else 2
             zeros = np.zeros(n)
             a["dots"] = ax.scatter(zeros, zeros, s=dot, zorder=3, linewidths=0)
@@ -289,6 +291,12 @@ def _edge_segments(pos: np.ndarray, edges: np.ndarray, box: float | None) -> np.
         wrapped = np.any(np.abs(b - a - d) > 1e-12, axis=1)
         segs.append(np.stack([b[wrapped], b[wrapped] - d[wrapped]], axis=1))
     return np.concatenate(segs)
+
+
+def _polyline(segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(S, 2, 2) segments as the x and y of one line, a NaN after each segment."""
+    pts = np.concatenate([segments, np.full((len(segments), 1, 2), np.nan)], axis=1)
+    return pts[:, :, 0].ravel(), pts[:, :, 1].ravel()
 
 
 def _trails(run: RunData, k: int, window: int) -> np.ndarray:

@@ -30,9 +30,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from pydantic import ValidationError
+
 from flocklab.schemas import FieldError, Scenario
 from flocklab.schemas.sweep import Sweep, SweepError, SweepRun
-from pydantic import ValidationError
 
 from ..execute import run_summary
 from .executors import Executor, LocalExecutor

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+
 from flocklab.schemas.sweep import REPLICAS_PATH, Sweep, SweepRun
 
 from .measures import replica_stats

@@ -13,6 +13,7 @@ from typing import Any
 
 import httpx
 import pytest
+
 from flocklab.service.serve import ServerProcess
 
 from ..service.conftest import TEST_ENV, _cleanup

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+
 from flocklab.schemas import Scenario, get_preset
 
 pytest.importorskip("matplotlib")

@@ -11,6 +11,7 @@ import time
 import h5py
 import numpy as np
 import pytest
+
 from flocklab.service.render.errors import RenderInputError
 from flocklab.service.render.figure import new_figure, save
 from flocklab.service.render.plots import draw_observables
@@ -135,6 +136,7 @@ def test_observables_plot_marks_convergence(runs, tmp_path):
 
 def test_movie_mp4_and_gif(runs, tmp_path):
     import imageio.v3 as iio
+
     from flocklab.service.render.movie import write_movie
 
     run = RunData(runs["formation_F1"])

@@ -9,6 +9,7 @@ import subprocess
 import sys
 
 import numpy as np
+
 from flocklab.schemas import Scenario
 from flocklab.service.render.figure import new_figure
 from flocklab.service.render.plots import draw_sweep

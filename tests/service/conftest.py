@@ -11,6 +11,7 @@ from pathlib import Path
 
 import httpx
 import pytest
+
 from flocklab.service.serve import ServerProcess
 
 MiB = 2**20

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import httpx
 import pytest
+
 from flocklab.service.serve import ServerProcess
 
 from .svc_helpers import scenario, submit, wait_for

@@ -10,6 +10,7 @@ import time
 
 import httpx
 import pytest
+
 from flocklab.service.app.connections import RESERVED_FDS, connection_cap
 
 from .svc_helpers import long_scenario, submit

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import httpx
 import pytest
+
 from flocklab.service.jobs.disk import free_bytes
 
 from .svc_helpers import assert_problem, long_scenario, scenario, submit, wait_for

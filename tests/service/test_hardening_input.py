@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 import uvicorn
 from fastapi import FastAPI
+
 from flocklab.kernels import runtime
 from flocklab.service.app.problems import UnexpectedErrorMiddleware, install_problem_handlers
 from flocklab.service.serve import free_port

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import httpx
 import pytest
+
 from flocklab.service.serve import free_port
 
 from .svc_helpers import assert_problem, long_scenario, scenario, submit, wait_for

@@ -155,8 +155,10 @@ def test_cancel_a_running_job_within_seconds(http):
     assert done["status"] == "cancelled"
     assert time.monotonic() - t0 < 5
     assert done["steps_done"] < 100_000
-    # Cancelling again is a no-op; the state stays final (R4).
-    assert http.post(f"/v1/jobs/{job['id']}/cancel").json()["status"] == "cancelled"
+    # Cancelling a cancelled job is 409 like any finished job; the state stays final (R4).
+    again = assert_problem(http.post(f"/v1/jobs/{job['id']}/cancel"), 409)
+    assert again["status_now"] == "cancelled"
+    assert http.get(f"/v1/jobs/{job['id']}").json()["status"] == "cancelled"
 
 
 def test_a_cancelled_queued_job_never_starts(http):

@@ -10,6 +10,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
+
 from flocklab import clients
 
 from .svc_helpers import assert_problem, long_scenario, scenario, submit, wait_for
@@ -110,18 +111,27 @@ def test_render_routes_need_the_api_key(make_server):
         # the viewer page itself carries no data: it loads, then asks for the key
         page = http.get("/")
         assert page.status_code == 200 and "flocklab viewer" in page.text
+        # the API description needs the key, so the docs pages are off
+        for docs in ("/docs", "/redoc", "/docs-redoc.js", "/docs-assets/swagger-ui.css"):
+            assert http.get(docs).status_code == 404, docs
 
 
-def test_viewer_and_offline_swagger_ui(http):
+def test_viewer_and_offline_api_docs(http):
     page = http.get("/")
     assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
     for asset in ("/static/viewer.js", "/static/npz.js", "/static/viewer.css"):
         assert http.get(asset).status_code == 200, asset
-    docs = http.get("/docs").text
-    assert "cdn" not in docs.lower() and "/swagger-ui/swagger-ui-bundle.js" in docs
-    for asset in ("/swagger-ui/swagger-ui-bundle.js", "/swagger-ui/swagger-ui.css"):
-        r = http.get(asset)
-        assert r.status_code == 200 and len(r.content) > 10_000, asset
+    for path, assets in [("/docs", ("/docs-assets/swagger-ui-bundle.js",
+                                    "/docs-assets/swagger-ui.css")),
+                         ("/redoc", ("/docs-redoc.js",))]:
+        r = http.get(path)
+        assert "cdn" not in r.text.lower() and "fonts.googleapis" not in r.text
+        assert r.headers["content-security-policy"].startswith("default-src 'self'")
+        for asset in assets:
+            assert asset in r.text
+            got = http.get(asset)
+            assert got.status_code == 200 and len(got.content) > 100_000, asset
+            assert b"cdn.redoc.ly" not in got.content
 
 
 def test_api_process_never_loads_plotting_or_the_engine(server, http, done_job):

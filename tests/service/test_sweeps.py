@@ -14,6 +14,7 @@ from typing import Any
 
 import httpx
 import pytest
+
 from flocklab.service.serve import ServerProcess
 
 from .conftest import TEST_ENV, _cleanup
@@ -74,7 +75,8 @@ def wait_sweep(http: httpx.Client, sweep_id: str, until: Any = None, timeout: fl
     """Long-poll until `until(sweep)` holds (default: the sweep has finished)."""
     deadline = time.monotonic() + timeout
     while True:
-        s = http.get(f"/v1/sweeps/{sweep_id}", params={"wait": 2}).json()
+        params = {"wait": 2, "until": "change"} if until else {"wait": 2}
+        s = http.get(f"/v1/sweeps/{sweep_id}", params=params).json()
         if (until(s) if until else s["status"] in ("succeeded", "failed", "cancelled",
                                                     "timed_out")):
             return s
@@ -169,7 +171,8 @@ def test_cancel_keeps_the_finished_runs(http: httpx.Client):
     never = http.get(f"/v1/sweeps/{queued['id']}").json()
     assert never["status"] == "cancelled" and never["attempts"] == 0
     assert_problem(http.get(f"/v1/sweeps/{queued['id']}/table"), 404)
-    assert http.post(f"/v1/sweeps/{long['id']}/cancel").status_code == 202  # a no-op
+    again = assert_problem(http.post(f"/v1/sweeps/{long['id']}/cancel"), 409)
+    assert again["type"].endswith("sweep-finished") and again["status_now"] == "cancelled"
     finished = wait_sweep(http, submit(http, sweep_spec(etas=(1.0,), replicas=1))["id"])
     body = assert_problem(http.post(f"/v1/sweeps/{finished['id']}/cancel"), 409)
     assert body["type"].endswith("sweep-finished")

@@ -89,6 +89,17 @@ def test_over_the_service_limits_is_422_naming_the_field(http, body, loc):
     assert _job_count(http) == before
 
 
+def test_the_trajectory_limit_counts_float32_frames_and_the_image(http):
+    # 81 frames x 4000 agents x (position + heading, + the int32 x 2 periodic image):
+    # 32 B a row in float64 = 10.4 MB > 8 MiB; 20 B in float32 = 6.5 MB, under it.
+    body = scenario(n=4000, steps=80, every=1)
+    problem = assert_problem(http.post("/v1/jobs", json={"scenario": body}), 422,
+                             "recording.every")
+    assert "9.9 MiB" in problem["detail"], problem["detail"]
+    body["recording"]["precision"] = "float32"
+    assert http.post("/v1/jobs", json={"scenario": body}).status_code == 202
+
+
 def test_oversized_body_is_413_before_parsing(http, server):
     before = _job_count(http)
     big = b'{"scenario": {"name": "' + b"x" * 300_000 + b'"}}'

@@ -48,7 +48,9 @@ class Watched:
         self.page.on("console", lambda m: self.errors.append(m.text) if m.type == "error"
                      else None)
         self.page.on("pageerror", lambda e: self.errors.append(str(e)))
-        self.page.on("request", lambda r: self.hosts.add(urlsplit(r.url).hostname or r.url))
+        # downloads are blob: URLs of this origin
+        self.page.on("request", lambda r: self.hosts.add(
+            urlsplit(r.url.removeprefix("blob:")).hostname or r.url))
         self.page.goto(url)
         self.page.wait_for_selector("#preset option", state="attached")
 
@@ -76,8 +78,9 @@ def test_submit_follow_play_and_validation(browser, server, tmp_path):
     page.wait_for_function("() => document.querySelector('#job-id').textContent.length > 30")
     job_id = page.text_content("#job-id")
     page.wait_for_selector(f'#jobs tr[data-id="{job_id}"]')  # the job list shows it
-    progress, deadline = [], time.monotonic() + 120
+    progress, plot_while_running, deadline = [], [], time.monotonic() + 120
     while page.text_content("#job-status") != "succeeded":
+        plot_while_running.append(canvas_ink(page, "#plot"))
         assert time.monotonic() < deadline, page.text_content("#job-status")
         assert page.text_content("#job-status") not in ("failed", "cancelled", "timed_out")
         progress.append(float(page.get_attribute("#job-progress", "value") or 0))
@@ -86,6 +89,15 @@ def test_submit_follow_play_and_validation(browser, server, tmp_path):
     assert progress == sorted(progress) and progress[-1] == 1.0
     assert any(0 < p < 1 for p in progress), progress  # seen part-way, over SSE
 
+    # the observables arrive with the results, announced on the event stream: the plot
+    # is drawn then, without a click (the engine reports them at the end of a run)
+    assert max(plot_while_running) == 0
+    page.wait_for_function("""() => {
+        const c = document.querySelector('#plot');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        for (let i = 3; i < d.length; i += 4) if (d[i] > 0) return true;
+        return false;
+    }""", timeout=60_000)
     page.wait_for_selector("#play:not([disabled])", timeout=60_000)
     assert canvas_ink(page) > 0.002
     page.click("#play")
@@ -153,3 +165,93 @@ def test_playback_rate_at_ten_thousand_agents(browser, make_server, capsys):
               f"live counter {live}")
     assert fps > 0 and canvas_ink(w.page) > 0.002
     assert not w.errors, w.errors
+
+
+def test_sweep_list_follows_a_sweep_submitted_from_the_page(browser, server):
+    """The form's scenario swept over model.eta from the page: the sweep list shows it
+    running, then ended with its runs counted, without a reload (the event stream and
+    the list's refresh), and its table is plotted (one point per eta) with the download
+    buttons. The engine fuses a chunk of runs into one launch, so the counter may jump
+    from 0 to 6: only its order is asserted."""
+    w = Watched(browser, server.url + "/")
+    page = w.page
+    page.select_option("#preset", "vicsek-1995")
+    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
+    page.fill('#fields .field[data-path="time.steps"] input', "800")
+    page.select_option("#sweep-axis", "model.eta")
+    page.fill("#sweep-values", "0.5, 2, 4")
+    page.fill("#sweep-replicas", "2")
+    page.click("#submit-sweep")
+    page.wait_for_function("() => document.querySelector('#panel-kind').textContent === 'Sweep'"
+                           " && document.querySelector('#job-id').textContent.length > 30")
+    sweep_id = page.text_content("#job-id")
+    row = page.locator(f'#sweeps tr[data-id="{sweep_id}"]')
+    row.wait_for()  # the sweep list shows it
+    seen, deadline = [], time.monotonic() + 240
+    while True:
+        cells = row.locator("td").all_text_contents()
+        seen.append((int(cells[2].split("/")[0]), cells[3]))
+        if cells[3] in ("succeeded", "failed", "cancelled", "timed_out"):
+            break
+        assert time.monotonic() < deadline, seen
+        time.sleep(0.1)
+    assert seen[-1] == (6, "succeeded"), seen
+    done = [d for d, _ in seen]
+    assert done == sorted(done), seen
+    states = [st for _, st in seen]
+    assert states[0] in ("queued", "running") and "running" in states, seen
+    assert page.text_content("#job-status") == "succeeded"
+    page.wait_for_selector("#downloads button >> nth=2")
+    assert page.locator("#downloads button").count() == 3
+    with page.expect_download() as download:
+        page.click("#downloads button >> text=table.csv")
+    header = Path(download.value.path()).read_text().splitlines()[0].split(",")
+    assert "model.eta" in header and "polarization_mean" in header, header
+    page.wait_for_function(
+        "() => document.querySelector('#plot-legend').textContent.includes('model.eta')")
+    assert canvas_ink(page, "#plot") > 0.001
+    if DOCS_IMG:
+        page.evaluate("window.scrollTo(0, 0)")
+        page.screenshot(path=str(Path(DOCS_IMG) / "viewer_sweep.png"))
+    assert not w.errors, w.errors
+    assert w.hosts == {"127.0.0.1"}, w.hosts
+
+
+@pytest.mark.parametrize("path, rendered", [("/docs", ".swagger-ui .info .title"),
+                                            ("/redoc", "h1")])
+def test_api_docs_render_offline(browser, server, path, rendered):
+    """Swagger UI and ReDoc draw the API's title from the package's own files."""
+    title = httpx.get(f"{server.url}/openapi.json").json()["info"]["title"]
+    page = browser.new_page()
+    errors: list[str] = []
+    hosts: set[str] = set()
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    # ReDoc starts a web worker from a blob: URL of this origin
+    page.on("request", lambda r: hosts.add(urlsplit(r.url.removeprefix("blob:")).hostname
+                                           or r.url))
+    page.goto(server.url + path)
+    page.locator(rendered).filter(has_text=title).first.wait_for(timeout=60_000)
+    assert not errors, errors
+    assert hosts == {"127.0.0.1"}, hosts
+    page.close()
+
+
+def test_cancel_from_the_page(browser, server):
+    w = Watched(browser, server.url + "/")
+    page = w.page
+    page.select_option("#preset", "vicsek-1995")
+    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
+    page.fill('#fields .field[data-path="time.steps"] input', "200000")
+    page.fill('#fields .field[data-path="recording.every"] input', "0")  # within the limits
+    page.click("#submit")
+    page.wait_for_function("() => document.querySelector('#job-status').textContent === "
+                           "'running'", timeout=60_000)
+    page.click("#cancel")
+    page.wait_for_function("() => document.querySelector('#job-status').textContent === "
+                           "'cancelled'", timeout=60_000)
+    assert page.is_disabled("#cancel")
+    job_id = page.text_content("#job-id")
+    assert httpx.get(f"{server.url}/v1/jobs/{job_id}").json()["status"] == "cancelled"
+    assert not w.errors, w.errors
+    assert w.hosts == {"127.0.0.1"}, w.hosts

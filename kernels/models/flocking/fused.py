@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 import taichi as ti
+
 from flocklab.schemas import Scenario
 
 from ...batch import FusedBatch

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 import taichi as ti
+
 from flocklab.schemas import Scenario
 
 from ...model import ModelKernel, register_kernel

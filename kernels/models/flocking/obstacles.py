@@ -16,6 +16,7 @@ or copies a neighbour's radius), so the 3x3 cells always hold N_i.
 from typing import Any
 
 import numpy as np
+
 from flocklab.schemas import Scenario
 
 from ...model import register_kernel

@@ -15,6 +15,7 @@ from the initial state's, so the same seed gives the same graph.
 from __future__ import annotations
 
 import numpy as np
+
 from flocklab.schemas.flocking import GraphSpec
 
 GRAPH_STREAM = 0x6772_6170  # "grap"

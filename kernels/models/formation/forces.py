@@ -16,6 +16,7 @@ solving eq. 8.
 
 import numpy as np
 import taichi as ti
+
 from flocklab.schemas.formation import FormationParams, LinearF, QuadraticF, SaturatingF
 
 from ...space.params import Slots

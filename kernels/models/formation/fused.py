@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 import taichi as ti
+
 from flocklab.schemas import Scenario
 from flocklab.schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
 

@@ -15,6 +15,7 @@ import math
 from abc import ABC, abstractmethod
 
 import numpy as np
+
 from flocklab.schemas.formation import Path as PathSpec
 from flocklab.schemas.formation import SplinePath, StraightPath
 

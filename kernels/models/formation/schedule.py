@@ -14,6 +14,7 @@ zero, so b(t) keeps mean zero (paper condition 1); a rotation keeps every pair d
 from __future__ import annotations
 
 import numpy as np
+
 from flocklab.schemas.formation import FormationChange, FormationSpec
 
 from .shapes import offsets, rotation

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from flocklab.schemas.formation import ExplicitFormation, FormationSpec, NamedFormation
 
 _SQ3 = math.sqrt(3.0)

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 import taichi as ti
+
 from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
 from ...batch import FusedBatch

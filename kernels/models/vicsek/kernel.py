@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 import taichi as ti
+
 from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
 from ...model import ModelKernel, register_kernel

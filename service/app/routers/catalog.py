@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from fastapi import APIRouter
+
 from flocklab.schemas import PRESETS, describe_models, get_preset
 
 from ..problems import ProblemError

@@ -4,26 +4,23 @@ from __future__ import annotations
 
 import base64
 import json
-import time
-from collections.abc import AsyncIterator
 from typing import Annotated
 
 from fastapi import APIRouter, Header, Query, Request
 from fastapi.responses import JSONResponse, StreamingResponse
+from starlette.concurrency import run_in_threadpool
+
 from flocklab.schemas import FieldError
 from flocklab.service.jobs import IdempotencyConflict, NewJob, QueueFull
-from starlette.concurrency import run_in_threadpool
 
 from ..admission import queue_full, queue_gauge
 from ..deps import HubDep, JobId, RuntimeDep, SettingsDep, get_job
-from ..events import wait_for_change
+from ..follow import Until, cancel_row, event_stream, long_poll
 from ..problems import ProblemError, invalid
 from ..submission import parse_submission
 from ..wire import EXAMPLE_SCENARIO, JobList, JobView, Status, job_view
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
-
-SSE_KEEPALIVE_SECONDS = 15.0
 
 
 @router.post(
@@ -106,6 +103,10 @@ def list_jobs(
 
 
 @router.get("/{job_id}", response_model=JobView, summary="Get a job",
+            description="With `wait`, a long-poll: the answer comes when the job has "
+            "finished, or after `wait` seconds with the job as it is then. With "
+            "`until=change` it comes at the job's first change (status or progress) "
+            "instead: what a progress display polls with.",
             responses={401: {}, 404: {}, 422: {}})
 async def get_job_route(
     job_id: JobId,
@@ -113,32 +114,25 @@ async def get_job_route(
     settings: SettingsDep,
     hub: HubDep,
     wait: Annotated[float, Query(ge=0, le=60, description=(
-        "Long-poll: answer as soon as the job changes (status or progress) or is "
-        "finished, or after this many seconds."))] = 0,
+        "Long-poll: answer as soon as the job is finished (or, with until=change, as soon "
+        "as it changes), or after this many seconds."))] = 0,
+    until: Annotated[Until, Query(description=(
+        "What a long-poll waits for: the job's end (default) or its next change."))
+    ] = "finished",
 ) -> JobView:
-    with hub.subscribe(str(job_id)) as changed:
-        job = await run_in_threadpool(get_job, runtime, job_id)
-        if wait > 0 and not job.terminal and await wait_for_change(changed, wait):
-            job = await run_in_threadpool(get_job, runtime, job_id)
+    job = await long_poll(hub, str(job_id), lambda: get_job(runtime, job_id), wait, until)
     return job_view(job, settings.result_ttl_seconds)
 
 
 @router.post("/{job_id}/cancel", status_code=202, response_model=JobView,
              summary="Cancel a job",
              description="A queued job is cancelled at once; a running one is asked to stop "
-             "and is killed if it has not stopped after the grace period. Cancelling a "
-             "cancelled job is a no-op; any other finished job gives 409.",
+             "and is killed if it has not stopped after the grace period (cancelling it "
+             "again while it stops is a no-op). A finished job (succeeded, failed, "
+             "cancelled or timed out) gives 409 `job-finished` with `status_now`.",
              responses={401: {}, 404: {}, 409: {}, 422: {}})
 def cancel(job_id: JobId, runtime: RuntimeDep, settings: SettingsDep) -> JobView:
-    get_job(runtime, job_id)
-    job = runtime.store.request_cancel(str(job_id))
-    assert job is not None
-    if job.terminal and job.status != "cancelled":
-        raise ProblemError(409, "job-finished", "Job already finished",
-                           f"the job is {job.status}; it can no longer be cancelled",
-                           status_now=job.status)
-    if job.status == "running":
-        runtime.supervisor.cancel(job.id)
+    job = cancel_row(runtime, lambda: get_job(runtime, job_id), "job")
     return job_view(job, settings.result_ttl_seconds)
 
 
@@ -152,27 +146,8 @@ def cancel(job_id: JobId, runtime: RuntimeDep, settings: SettingsDep) -> JobView
 async def events(job_id: JobId, runtime: RuntimeDep, settings: SettingsDep, hub: HubDep
                  ) -> StreamingResponse:
     await run_in_threadpool(get_job, runtime, job_id)
-
-    async def stream() -> AsyncIterator[str]:
-        last = None
-        with hub.subscribe(str(job_id)) as changed:
-            while True:
-                job = await run_in_threadpool(get_job, runtime, job_id)
-                view = job_view(job, settings.result_ttl_seconds).model_dump_json()
-                if view != last:
-                    last = view
-                    yield f"event: job\ndata: {view}\n\n"
-                if job.terminal:
-                    yield "event: end\ndata: {}\n\n"
-                    return
-                if hub.closing:  # the server is shutting down: reconnect later
-                    yield "event: shutdown\ndata: {}\n\n"
-                    return
-                if not await wait_for_change(changed, SSE_KEEPALIVE_SECONDS):
-                    yield f": keep-alive {time.time():.0f}\n\n"
-
-    return StreamingResponse(stream(), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
+    return event_stream(hub, str(job_id), lambda: get_job(runtime, job_id),
+                        lambda j: job_view(j, settings.result_ttl_seconds), "job")
 
 
 def _encode_cursor(seq: int) -> str:

@@ -22,9 +22,10 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, FastAPI, Query, Request
 from fastapi.responses import FileResponse
+from starlette.concurrency import run_in_threadpool
+
 from flocklab.schemas import FieldError
 from flocklab.service.jobs import Job
-from starlette.concurrency import run_in_threadpool
 
 from ..deps import JobId, RuntimeDep
 from ..problems import ProblemError, invalid

@@ -17,8 +17,9 @@ from typing import Annotated, Any, Literal
 import h5py
 from fastapi import APIRouter, Header, Query
 from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
-from flocklab.service.jobs import Job, JobRuntime
 from starlette.concurrency import run_in_threadpool
+
+from flocklab.service.jobs import Job, JobRuntime
 
 from .. import trajectory as traj
 from ..deps import JobId, RuntimeDep, SettingsDep, get_job

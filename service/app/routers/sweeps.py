@@ -7,28 +7,27 @@ retried once when its worker is lost, continuing from the runs it had finished.
 
 from __future__ import annotations
 
-import time
 import uuid
-from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Annotated, Literal
 
 from fastapi import APIRouter, Header, Query, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse, Response, StreamingResponse
+from starlette.concurrency import run_in_threadpool
+
 from flocklab.schemas.status import SweepList, SweepStatus
 from flocklab.service.jobs import IdempotencyConflict, Job, JobRuntime, NewJob, QueueFull
 from flocklab.service.sweeps.tables import read_table
-from starlette.concurrency import run_in_threadpool
 
 from ..admission import queue_full, queue_gauge
 from ..deps import HubDep, RuntimeDep, SettingsDep, get_job
-from ..events import wait_for_change
+from ..follow import Until, cancel_row, event_stream, long_poll
 from ..problems import ProblemError
 from ..sweep_submission import parse_sweep_submission
 from ..sweep_wire import EXAMPLE_SWEEP, sweep_view
 from ..wire import Status
-from .jobs import SSE_KEEPALIVE_SECONDS, _decode_cursor, _encode_cursor
+from .jobs import _decode_cursor, _encode_cursor
 
 router = APIRouter(prefix="/sweeps", tags=["sweeps"])
 
@@ -121,6 +120,9 @@ def list_sweeps(
 
 
 @router.get("/{sweep_id}", response_model=SweepStatus, summary="Get a sweep",
+            description="With `wait`, a long-poll: the answer comes when the sweep has "
+            "finished, or after `wait` seconds with the sweep as it is then. With "
+            "`until=change` it comes at its first change (status or runs done) instead.",
             responses={401: {}, 404: {}, 422: {}})
 async def get_sweep(
     sweep_id: SweepId,
@@ -128,13 +130,13 @@ async def get_sweep(
     settings: SettingsDep,
     hub: HubDep,
     wait: Annotated[float, Query(ge=0, le=60, description=(
-        "Long-poll: answer as soon as the sweep changes (status or runs done) or is "
-        "finished, or after this many seconds."))] = 0,
+        "Long-poll: answer as soon as the sweep is finished (or, with until=change, as "
+        "soon as it changes), or after this many seconds."))] = 0,
+    until: Annotated[Until, Query(description=(
+        "What a long-poll waits for: the sweep's end (default) or its next change."))
+    ] = "finished",
 ) -> SweepStatus:
-    with hub.subscribe(str(sweep_id)) as changed:
-        job = await run_in_threadpool(_get, runtime, sweep_id)
-        if wait > 0 and not job.terminal and await wait_for_change(changed, wait):
-            job = await run_in_threadpool(_get, runtime, sweep_id)
+    job = await long_poll(hub, str(sweep_id), lambda: _get(runtime, sweep_id), wait, until)
     return sweep_view(job, settings.result_ttl_seconds)
 
 
@@ -150,19 +152,12 @@ def spec(sweep_id: SweepId, runtime: RuntimeDep) -> Response:
 @router.post("/{sweep_id}/cancel", status_code=202, response_model=SweepStatus,
              summary="Cancel a sweep",
              description="A queued sweep is cancelled at once; a running one stops after "
-             "its current runs, keeping the runs it finished (their table can be fetched). "
-             "Cancelling a cancelled sweep is a no-op; any other finished sweep gives 409.",
+             "its current runs, keeping the runs it finished (their table can be fetched); "
+             "cancelling it again while it stops is a no-op. A finished sweep (succeeded, "
+             "failed, cancelled or timed out) gives 409 `sweep-finished` with `status_now`.",
              responses={401: {}, 404: {}, 409: {}, 422: {}})
 def cancel(sweep_id: SweepId, runtime: RuntimeDep, settings: SettingsDep) -> SweepStatus:
-    _get(runtime, sweep_id)
-    job = runtime.store.request_cancel(str(sweep_id))
-    assert job is not None
-    if job.terminal and job.status != "cancelled":
-        raise ProblemError(409, "sweep-finished", "Sweep already finished",
-                           f"the sweep is {job.status}; it can no longer be cancelled",
-                           status_now=job.status)
-    if job.status == "running":
-        runtime.supervisor.cancel(job.id)
+    job = cancel_row(runtime, lambda: _get(runtime, sweep_id), "sweep")
     return sweep_view(job, settings.result_ttl_seconds)
 
 
@@ -176,27 +171,8 @@ def cancel(sweep_id: SweepId, runtime: RuntimeDep, settings: SettingsDep) -> Swe
 async def events(sweep_id: SweepId, runtime: RuntimeDep, settings: SettingsDep, hub: HubDep
                  ) -> StreamingResponse:
     await run_in_threadpool(_get, runtime, sweep_id)
-
-    async def stream() -> AsyncIterator[str]:
-        last = None
-        with hub.subscribe(str(sweep_id)) as changed:
-            while True:
-                job = await run_in_threadpool(_get, runtime, sweep_id)
-                view = sweep_view(job, settings.result_ttl_seconds).model_dump_json()
-                if view != last:
-                    last = view
-                    yield f"event: sweep\ndata: {view}\n\n"
-                if job.terminal:
-                    yield "event: end\ndata: {}\n\n"
-                    return
-                if hub.closing:  # the server is shutting down: reconnect later
-                    yield "event: shutdown\ndata: {}\n\n"
-                    return
-                if not await wait_for_change(changed, SSE_KEEPALIVE_SECONDS):
-                    yield f": keep-alive {time.time():.0f}\n\n"
-
-    return StreamingResponse(stream(), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
+    return event_stream(hub, str(sweep_id), lambda: _get(runtime, sweep_id),
+                        lambda j: sweep_view(j, settings.result_ttl_seconds), "sweep")
 
 
 Format = Annotated[Literal["csv", "json"] | None, Query(

@@ -65,6 +65,8 @@ function readNpy(buffer, offset, size) {
   if (descr === "<f8") data = new Float64Array(body);
   else if (descr === "<i8") data = Float64Array.from(new BigInt64Array(body), Number);
   else if (descr === "<f4") data = Float64Array.from(new Float32Array(body.slice(0, count * 4)));
+  // H5MD's periodic `image` (int32), served beside the positions.
+  else if (descr === "<i4") data = Float64Array.from(new Int32Array(body.slice(0, count * 4)));
   else throw new Error("unsupported array type " + descr);
   return { shape, data };
 }

@@ -17,7 +17,9 @@ const USUAL = {
 
 const $ = (id) => document.getElementById(id);
 const state = { key: sessionStorage.getItem(KEY_STORE) || "", presets: [], selected: null,
-                follow: null, player: null, jobs: [] };
+                selectedSweep: null, follow: null, player: null, jobs: [], sweeps: [],
+                scenario: null };
+const TERMINAL = ["succeeded", "failed", "cancelled", "timed_out"];
 
 // -- HTTP ---------------------------------------------------------------------------------
 
@@ -124,6 +126,17 @@ async function showPreset(name) {
     row.append(label, input, msg);
     fields.append(row);
   }
+  state.scenario = preset.scenario;
+  const axis = $("sweep-axis");
+  axis.replaceChildren(...flatten(preset.scenario, "", [])
+    .filter(([path, v]) => typeof v === "number" && path !== "seed")
+    .map(([path]) => {
+      const o = document.createElement("option");
+      o.value = o.textContent = path;
+      return o;
+    }));
+  const eta = [...axis.options].find((o) => o.value === "model.eta");
+  if (eta) axis.value = eta.value;
 }
 
 function readForm() {
@@ -187,13 +200,42 @@ $("submit-form").addEventListener("submit", async (ev) => {
   try {
     const job = await api("/v1/jobs", { method: "POST", body: JSON.stringify({ scenario }),
                                         headers: { "Content-Type": "application/json" } });
-    await refreshJobs();
+    await refreshLists();
     selectJob(job.id);
   } catch (err) {
     if (err.problem) showProblem(err.problem);
     else $("submit-error").textContent = err.message;
   } finally {
     $("submit").disabled = false;
+  }
+});
+
+// A sweep of the form's scenario over one numeric field: the measure is the model's
+// first usual observable at the end of each run (the sweep plot draws it per value).
+$("submit-sweep").addEventListener("click", async () => {
+  clearMarks();
+  const base = readForm();
+  if (!base) return;
+  const path = $("sweep-axis").value;
+  const values = $("sweep-values").value.split(",").map((v) => v.trim()).filter((v) => v)
+    .map((v) => (Number.isFinite(Number(v)) ? Number(v) : v));
+  if (!values.length) { $("submit-error").textContent = "sweep: give the values, e.g. 0.5, 1, 2"; return; }
+  const observable = (USUAL[base.model && base.model.kind] || ["polarization"])[0];
+  const body = { name: `${$("preset").value}-${path}`, base, replicas: Number($("sweep-replicas").value) || 1,
+                 axes: [{ path, values }],
+                 measure: { [observable]: { observable, reduce: "final" } } };
+  $("submit-sweep").disabled = true;
+  try {
+    const sweep = await api("/v1/sweeps", { method: "POST", body: JSON.stringify(body),
+                                            headers: { "Content-Type": "application/json" } });
+    await refreshSweeps();
+    selectSweep(sweep.id);
+  } catch (err) {
+    if (err.problem) showProblem(Object.assign({}, err.problem, { errors: (err.problem.errors || [])
+      .map((e) => Object.assign({}, e, { loc: String(e.loc).replace(/^base\./, "") })) }));
+    else $("submit-error").textContent = err.message;
+  } finally {
+    $("submit-sweep").disabled = false;
   }
 });
 
@@ -232,6 +274,49 @@ async function refreshJobs() {
   }));
 }
 
+// -- the sweep list -----------------------------------------------------------------------
+
+function sweepRuns(sw) {
+  return `${sw.runs_done}/${sw.runs_total}` + (sw.runs_failed ? ` (${sw.runs_failed} failed)` : "");
+}
+
+async function refreshSweeps() {
+  try {
+    const page = await api("/v1/sweeps?limit=30");
+    state.sweeps = page.items;
+    $("sweep-list-state").textContent = "";
+  } catch (err) {
+    $("sweep-list-state").textContent = err.status === 401 ? "(enter the API key)" : `(${err.message})`;
+    return;
+  }
+  const body = document.querySelector("#sweeps tbody");
+  body.replaceChildren(...state.sweeps.map((sw) => {
+    const tr = document.createElement("tr");
+    tr.dataset.id = sw.id;
+    tr.className = sw.id === state.selectedSweep ? "selected" : "";
+    const cells = [sw.id.slice(0, 8), sw.name || sw.model, sweepRuns(sw), sw.status];
+    for (const [i, text] of cells.entries()) {
+      const td = document.createElement("td");
+      td.textContent = text;
+      if (i === 0) td.className = "mono";
+      if (i === 3) td.className = `status ${sw.status}`;
+      tr.append(td);
+    }
+    const td = document.createElement("td");
+    const bar = document.createElement("progress");
+    bar.max = 1;
+    bar.value = sw.progress;
+    td.append(bar);
+    tr.append(td);
+    tr.addEventListener("click", () => selectSweep(sw.id));
+    return tr;
+  }));
+}
+
+function refreshLists() {
+  return Promise.all([refreshJobs(), refreshSweeps()]);
+}
+
 // -- one job: live status over SSE, then its results ---------------------------------------
 
 function showJob(job) {
@@ -242,7 +327,7 @@ function showJob(job) {
   $("job-progress").value = job.progress;
   $("job-progress-text").textContent = `${Math.round(job.progress * 100)}%  `
     + `step ${job.steps_done}/${job.steps_total}`;
-  $("cancel").disabled = ["succeeded", "failed", "cancelled", "timed_out"].includes(job.status);
+  $("cancel").disabled = TERMINAL.includes(job.status);
   $("job-error").textContent = job.error ? `${job.error.title}: ${job.error.detail || ""}` : "";
   const row = document.querySelector(`#jobs tr[data-id="${job.id}"]`);
   if (row) {
@@ -256,9 +341,11 @@ async function selectJob(id) {
   if (state.follow) state.follow.abort();
   stopPlayer();
   state.selected = id;
-  for (const tr of document.querySelectorAll("#jobs tbody tr")) {
-    tr.classList.toggle("selected", tr.dataset.id === id);
-  }
+  state.selectedSweep = null;
+  markSelected();
+  $("panel-kind").textContent = "Job";
+  $("plot-title").textContent = "Observables";
+  $("player").hidden = false;
   $("downloads").replaceChildren();
   clearPlot();
   const follow = new AbortController();
@@ -302,10 +389,80 @@ async function readEvents(path, signal, onEvent) {
 }
 
 $("cancel").addEventListener("click", async () => {
-  if (!state.selected) return;
-  try { showJob(await api(`/v1/jobs/${state.selected}/cancel`, { method: "POST" })); }
-  catch (err) { $("job-error").textContent = err.message; }
+  try {
+    if (state.selectedSweep) {
+      showSweep(await api(`/v1/sweeps/${state.selectedSweep}/cancel`, { method: "POST" }));
+    } else if (state.selected) {
+      showJob(await api(`/v1/jobs/${state.selected}/cancel`, { method: "POST" }));
+    }
+  } catch (err) { $("job-error").textContent = err.message; }
 });
+
+function markSelected() {
+  for (const tr of document.querySelectorAll("#jobs tbody tr")) {
+    tr.classList.toggle("selected", tr.dataset.id === state.selected);
+  }
+  for (const tr of document.querySelectorAll("#sweeps tbody tr")) {
+    tr.classList.toggle("selected", tr.dataset.id === state.selectedSweep);
+  }
+}
+
+// -- one sweep: live status over SSE, then its table plotted -------------------------------
+
+function showSweep(sw) {
+  $("job-id").textContent = sw.id;
+  const st = $("job-status");
+  st.textContent = sw.status;
+  st.className = `status ${sw.status}`;
+  $("job-progress").value = sw.progress;
+  $("job-progress-text").textContent = `${Math.round(sw.progress * 100)}%  runs ${sweepRuns(sw)}`;
+  $("cancel").disabled = TERMINAL.includes(sw.status);
+  $("job-error").textContent = sw.error ? `${sw.error.title}: ${sw.error.detail || ""}` : "";
+  const row = document.querySelector(`#sweeps tr[data-id="${sw.id}"]`);
+  if (row) {
+    row.children[2].textContent = sweepRuns(sw);
+    row.children[3].textContent = sw.status;
+    row.children[3].className = `status ${sw.status}`;
+    row.querySelector("progress").value = sw.progress;
+  }
+}
+
+async function selectSweep(id) {
+  if (state.follow) state.follow.abort();
+  stopPlayer();
+  state.selected = null;
+  state.selectedSweep = id;
+  markSelected();
+  $("panel-kind").textContent = "Sweep";
+  $("plot-title").textContent = "Measures";
+  $("player").hidden = true;  // a sweep has no frames of its own
+  $("downloads").replaceChildren();
+  clearPlot();
+  const follow = new AbortController();
+  state.follow = follow;
+  let last = null;
+  try {
+    await readEvents(`/v1/sweeps/${id}/events`, follow.signal, (event, data) => {
+      if (event === "sweep") { last = JSON.parse(data); showSweep(last); }
+    });
+  } catch (err) {
+    if (follow.signal.aborted) return;
+    $("job-error").textContent = err.message;
+    return;
+  }
+  if (!follow.signal.aborted && last && last.results === "available") await loadSweepResults(last);
+}
+
+async function loadSweepResults(sw) {
+  const base = `/v1/sweeps/${sw.id}`;
+  const short = sw.id.slice(0, 8);
+  $("downloads").replaceChildren(
+    downloadButton("table.csv", `${base}/table?format=csv`, `${short}-table.csv`),
+    downloadButton("runs.csv", `${base}/runs?format=csv`, `${short}-runs.csv`),
+    downloadButton("plot.png", `${base}/render/plot.png`, `${short}-plot.png`));
+  const [spec, table] = await Promise.all([api(`${base}/spec`), api(`${base}/table?format=json`)]);
+  drawSweepPlot(spec, table);
+}
 
 function downloadButton(label, path, filename) {
   const b = document.createElement("button");
@@ -542,6 +699,66 @@ function drawPlot(metrics, model) {
     + (Object.keys(conv).length ? "; dashed: convergence time" : "");
 }
 
+const CURVE_COLOURS = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f"];
+
+function axisPath(axis) {
+  if (typeof axis === "string") return axis;
+  if (axis && axis.path) return axis.path;
+  return axis && axis.zip && axis.zip.length ? axisPath(axis.zip[0]) : null;
+}
+
+// Each measure's mean against the first axis, one curve per value of the second, with
+// the replicas' standard error as bars (the sweep plot of `flocklab render SWEEP_DIR`).
+function drawSweepPlot(spec, table) {
+  const c = $("plot");
+  const ctx = c.getContext("2d");
+  ctx.clearRect(0, 0, c.width, c.height);
+  const col = (name) => table.columns.indexOf(name);
+  const axes = (spec.axes || []).map(axisPath).filter((p) => p && col(p) >= 0);
+  const measures = table.columns.filter((n) => n.endsWith("_mean")).map((n) => n.slice(0, -5));
+  if (!axes.length || !measures.length || !table.data.length) {
+    $("plot-legend").textContent = "no measures to plot";
+    return;
+  }
+  const xi = col(axes[0]), gi = axes.length > 1 ? col(axes[1]) : -1;
+  const groups = [...new Set(table.data.map((r) => (gi >= 0 ? String(r[gi]) : "")))];
+  const xs = table.data.map((r) => Number(r[xi]));
+  const x0 = Math.min(...xs), x1 = Math.max(...xs);
+  const shown = measures.slice(0, 3);
+  const panel = c.height / shown.length;
+  ctx.font = "11px sans-serif";
+  shown.forEach((m, p) => {
+    const mi = col(`${m}_mean`), ei = col(`${m}_sem`) >= 0 ? col(`${m}_sem`) : col(`${m}_sd`);
+    const rows = table.data.filter((r) => r[mi] !== null);
+    const lo = Math.min(...rows.map((r) => r[mi] - (ei >= 0 && r[ei] !== null ? r[ei] : 0)));
+    const hi = Math.max(...rows.map((r) => r[mi] + (ei >= 0 && r[ei] !== null ? r[ei] : 0)));
+    const top = p * panel + 14, h = panel - 24, left = 50, w = c.width - 60;
+    const X = (x) => left + (x1 > x0 ? (x - x0) / (x1 - x0) : 0.5) * w;
+    const Y = (y) => top + h - (hi > lo ? (y - lo) / (hi - lo) : 0.5) * h;
+    ctx.strokeStyle = "#ccd";
+    ctx.strokeRect(left, top, w, h);
+    ctx.fillStyle = "#334";
+    ctx.fillText(`${m} against ${axes[0]}`, left + 4, top - 3);
+    ctx.fillText(hi.toPrecision(3), 2, top + 9);
+    ctx.fillText(lo.toPrecision(3), 2, top + h);
+    groups.forEach((g, k) => {
+      const pts = rows.filter((r) => gi < 0 || String(r[gi]) === g)
+        .map((r) => [Number(r[xi]), r[mi], ei >= 0 ? r[ei] : null]).sort((a, b) => a[0] - b[0]);
+      ctx.strokeStyle = ctx.fillStyle = CURVE_COLOURS[k % CURVE_COLOURS.length];
+      ctx.beginPath();
+      pts.forEach(([x, y], i) => (i ? ctx.lineTo(X(x), Y(y)) : ctx.moveTo(X(x), Y(y))));
+      ctx.stroke();
+      for (const [x, y, e] of pts) {
+        ctx.fillRect(X(x) - 2, Y(y) - 2, 4, 4);
+        if (e) { ctx.beginPath(); ctx.moveTo(X(x), Y(y - e)); ctx.lineTo(X(x), Y(y + e)); ctx.stroke(); }
+      }
+    });
+  });
+  $("plot-legend").textContent = `${axes[0]} ${x0} … ${x1}`
+    + (gi >= 0 ? `; one curve per ${axes[1]}: ${groups.join(", ")}` : "")
+    + "; bars: standard error over replicas";
+}
+
 // -- start --------------------------------------------------------------------------------
 
 let listTimer = null;
@@ -563,9 +780,9 @@ async function start() {
     return o;
   }));
   await showPreset(sel.value);
-  await refreshJobs();
-  if (listTimer === null) listTimer = setInterval(refreshJobs, 2000);
+  await refreshLists();
+  if (listTimer === null) listTimer = setInterval(refreshLists, 2000);
 }
 
-window.flocklabViewer = { state, measurePlayback, drawFrame, selectJob };
+window.flocklabViewer = { state, measurePlayback, drawFrame, selectJob, selectSweep };
 start();
