@@ -5,9 +5,9 @@ conserved, W (fixed) and Q (switching) do not increase."""
 
 import numpy as np
 import pytest
+
 from flocklab import kernels
 from flocklab.schemas import Scenario
-
 from tests.test_flocking_reference import euler, m2_accel, rk4
 
 
@@ -173,8 +173,9 @@ def test_obstacles_match_brute_force_step_by_step(taichi_cpu, case):
 
 
 def test_obstacle_coordinates_must_match_the_dimension():
-    from flocklab.schemas import field_errors
     from pydantic import ValidationError
+
+    from flocklab.schemas import field_errors
 
     with pytest.raises(ValidationError) as exc:
         m3_scenario(obstacles=[[1.0, 1.0]])

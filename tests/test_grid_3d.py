@@ -7,11 +7,11 @@ from functools import cache
 import numpy as np
 import pytest
 import taichi as ti
+from scipy.sparse.csgraph import connected_components
+
 from flocklab.kernels.space.graph import MetricGraph
 from flocklab.kernels.space.grid import Grid, make_visitor, permute_rows, row, within
 from flocklab.kernels.space.state import SortedState
-from scipy.sparse.csgraph import connected_components
-
 from tests.reference import adjacency
 from tests.test_grid import MAX_DEG, policy
 

@@ -4,7 +4,6 @@ import json
 import math
 
 import pytest
-from flocklab.schemas import MODELS, PRESETS, Scenario, field_errors, get_preset, parse_json_strict
 from pydantic import ValidationError
 
 from flocklab.schemas import MODELS, PRESETS, Scenario, field_errors, get_preset, parse_json_strict
@@ -167,10 +166,10 @@ def test_every_model_runs_reproducibly_on_every_available_backend(taichi_cpu):
 
 
 def test_jittered_lattice_start_keeps_agents_apart():
-    from flocklab.kernels.space.initial import initial_state
     from scipy.spatial import cKDTree
 
     from flocklab.kernels.space.initial import initial_state
+
 
     data = with_("initial", {"kind": "random", "N": 1600, "region": {
         "kind": "lattice", "low": [1, 1], "spacing": 0.2, "jitter": 0.3}})
@@ -187,10 +186,10 @@ def test_jittered_lattice_start_keeps_agents_apart():
 
 
 def test_vicsek_noise_above_two_pi_is_refused():
-    from flocklab.schemas.vicsek import VicsekParams
     from pydantic import ValidationError
 
     from flocklab.schemas.vicsek import VicsekParams
+
 
     assert VicsekParams.model_validate({"eta": 2 * math.pi}).eta == 2 * math.pi
     with pytest.raises(ValidationError, match=r"less than or equal to 6\.28"):

@@ -6,8 +6,9 @@ import subprocess
 import sys
 
 import pytest
-from flocklab.schemas import MODELS, Scenario, field_errors
 from pydantic import ValidationError
+
+from flocklab.schemas import MODELS, Scenario, field_errors
 
 BASE = {
     "model": {"kind": "vicsek", "eta": 0.5},

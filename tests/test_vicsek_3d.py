@@ -5,10 +5,10 @@ import math
 
 import numpy as np
 import pytest
+
 from flocklab import kernels
 from flocklab.kernels.space import rng
 from flocklab.schemas import Scenario
-
 from tests.reference import vicsek_step_3d
 from tests.test_vicsek import Frames, wrapped_diff
 
