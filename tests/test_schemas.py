@@ -170,7 +170,6 @@ def test_jittered_lattice_start_keeps_agents_apart():
 
     from flocklab.kernels.space.initial import initial_state
 
-
     data = with_("initial", {"kind": "random", "N": 1600, "region": {
         "kind": "lattice", "low": [1, 1], "spacing": 0.2, "jitter": 0.3}})
     sc = Scenario.model_validate(data)
@@ -189,7 +188,6 @@ def test_vicsek_noise_above_two_pi_is_refused():
     from pydantic import ValidationError
 
     from flocklab.schemas.vicsek import VicsekParams
-
 
     assert VicsekParams.model_validate({"eta": 2 * math.pi}).eta == 2 * math.pi
     with pytest.raises(ValidationError, match=r"less than or equal to 6\.28"):
