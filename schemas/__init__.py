@@ -2,6 +2,7 @@
 
 from .catalog import MODELS, ModelParams, describe_models
 from .common import (
+    Ball,
     Box,
     Disc,
     ExplicitInitial,
@@ -21,6 +22,7 @@ from .vicsek import VicsekParams
 __all__ = [
     "MODELS",
     "PRESETS",
+    "Ball",
     "Box",
     "Disc",
     "ExplicitInitial",

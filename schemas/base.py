@@ -20,6 +20,11 @@ PositiveInt = Annotated[StrictInt, Field(gt=0)]
 NonNegativeInt = Annotated[StrictInt, Field(ge=0)]
 # Pairs accept a JSON array or a Python list or tuple (the items stay strict).
 Vec2 = Annotated[tuple[Real, Real], Strict(False), Field(description="A point (x, y).")]
+# A point of the plane or of space: (x, y) or (x, y, z); the scenario checks that its
+# length matches `space.dimension`.
+Vec3 = Annotated[tuple[Real, Real, Real], Strict(False),
+                 Field(description="A point (x, y, z).")]
+Point = Vec2 | Vec3
 RealPair = Annotated[tuple[Real, Real], Strict(False)]
 NonNegativePair = Annotated[tuple[NonNegativeReal, NonNegativeReal], Strict(False)]
 

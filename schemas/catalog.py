@@ -28,6 +28,10 @@ class ModelParams(Strict):
     # The observables the model reports, when it declares them (then a scenario may
     # choose among them with recording.observables); None: not declared.
     observables: ClassVar[tuple[str, ...] | None] = None
+    # The values of space.dimension the model runs in; `dimensions_note` says which
+    # variants are narrower (checked by `check_scenario`).
+    dimensions: ClassVar[tuple[int, ...]] = (2,)
+    dimensions_note: ClassVar[str] = ""
 
     def check_scenario(self, scenario: Scenario) -> None:
         """Cross-block checks (raise ValueError with a user-facing message)."""
@@ -69,6 +73,8 @@ def describe_models() -> list[dict[str, Any]]:
                 "paper_inclusive": cls.paper_inclusive,
                 "state": list(cls.state_arrays),
                 "observables": None if cls.observables is None else list(cls.observables),
+                "dimensions": list(cls.dimensions),
+                "dimensions_note": cls.dimensions_note,
                 "parameters": params,
                 "json_schema": cls.model_json_schema(),
             }

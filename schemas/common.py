@@ -3,36 +3,45 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
-from pydantic import Field, StrictBool, field_validator, model_validator
+from pydantic import Field, StrictBool, ValidationInfo, field_validator, model_validator
 
 from .base import (
     MAX_ABS_COORD,
     NonNegativeInt,
     NonNegativePair,
+    Point,
     PositiveInt,
     PositiveReal,
     Real,
     RealPair,
     Strict,
     Vec2,
+    Vec3,
 )
 
 MAX_AGENTS = 50_000_000
+# 2: the plane and the square box (the papers' setting); 3: space and the cube.
+Dimension = Literal[2, 3]
+DIMENSION_DOC = "Spatial dimension: 2 (default) or 3."
 
 
 class PeriodicBox(Strict):
-    """A square periodic box [0, L)^2 (Vicsek's setting); positions are wrapped into it."""
+    """A square periodic box [0, L)^2 (Vicsek's setting), or in 3D the cube [0, L)^3;
+    positions are wrapped into it."""
 
     kind: Literal["periodic"] = "periodic"
     L: PositiveReal = Field(description="Side length of the periodic box (length units).")
+    dimension: Dimension = Field(default=2, description=DIMENSION_DOC)
 
 
 class Plane(Strict):
-    """The unbounded plane (the control papers). The neighbour grid follows the swarm."""
+    """The unbounded plane (the control papers), or in 3D unbounded space. The neighbour
+    grid follows the swarm."""
 
     kind: Literal["plane"] = "plane"
+    dimension: Dimension = Field(default=2, description=DIMENSION_DOC)
 
 
 Space = Annotated[PeriodicBox | Plane, Field(discriminator="kind")]
@@ -50,16 +59,23 @@ class Neighbours(Strict):
 
 
 class Box(Strict):
-    """Uniform random positions in an axis-aligned box."""
+    """Uniform random positions in an axis-aligned box (2 or 3 coordinates per corner)."""
 
     kind: Literal["box"] = "box"
-    low: Vec2 = Field(description="Lower-left corner.")
-    high: Vec2 = Field(description="Upper-right corner.")
+    low: Point = Field(description="Lower corner.")
+    high: Point = Field(description="Upper corner.")
+
+    @property
+    def dimension(self) -> int:
+        return len(self.low)
 
     @model_validator(mode="after")
     def _ordered(self) -> Box:
-        if not (self.low[0] < self.high[0] and self.low[1] < self.high[1]):
-            raise ValueError("box needs low < high in both coordinates")
+        if len(self.low) != len(self.high):
+            raise ValueError(f"box low has {len(self.low)} coordinates, high "
+                             f"{len(self.high)}")
+        if not all(lo < hi for lo, hi in zip(self.low, self.high, strict=True)):
+            raise ValueError("box needs low < high in every coordinate")
         return self
 
 
@@ -69,28 +85,56 @@ class Disc(Strict):
     kind: Literal["disc"] = "disc"
     center: Vec2 = (0.0, 0.0)
     radius: PositiveReal = Field(description="Disc radius.")
+    dimension: ClassVar[int] = 2
+
+
+class Ball(Strict):
+    """Uniform random positions in a ball (3D: uniform in volume)."""
+
+    kind: Literal["ball"] = "ball"
+    center: Vec3 = (0.0, 0.0, 0.0)
+    radius: PositiveReal = Field(description="Ball radius.")
+    dimension: ClassVar[int] = 3
 
 
 class Lattice(Strict):
     """A jittered square lattice: agent k at low + spacing (k mod m, k div m) + u, with
-    m = ceil(sqrt(N)) and u uniform in [-jitter, jitter]^2 * spacing. No two agents are
+    m = ceil(sqrt(N)) and u uniform in [-jitter, jitter]^2 * spacing. In 3D (`low` with
+    three coordinates) the cubic lattice low + spacing (k mod m, k div m mod m, k div m^2)
+    + u, m = ceil(cbrt(N)). No two agents are
     closer than spacing (1 - 2 jitter): the non-overlapping start that potentials
     singular at s = 0 need at large N (uniform random positions put some pair ~1e-6
     apart at N = 10^6)."""
 
     kind: Literal["lattice"] = "lattice"
-    low: Vec2 = Field(default=(0.0, 0.0), description="Position of lattice point 0.")
+    low: Point = Field(default=(0.0, 0.0), description="Position of lattice point 0.")
     spacing: PositiveReal = Field(description="Lattice spacing (length units).")
     jitter: float = Field(default=0.0, ge=0.0, lt=0.5, allow_inf_nan=False,
                           description="Uniform displacement per axis, as a fraction of spacing.")
 
+    @property
+    def dimension(self) -> int:
+        return len(self.low)
 
-Region = Annotated[Box | Disc | Lattice, Field(discriminator="kind")]
+    def side(self, n: int) -> int:
+        """Lattice points per axis for n agents: ceil(N^(1/dimension)), exactly."""
+        if self.dimension == 2:
+            return math.ceil(math.sqrt(n))
+        m = max(1, round(n ** (1.0 / self.dimension)))
+        while m ** self.dimension < n:
+            m += 1
+        while m > 1 and (m - 1) ** self.dimension >= n:
+            m -= 1
+        return m
+
+
+Region = Annotated[Box | Disc | Ball | Lattice, Field(discriminator="kind")]
 
 
 class RandomInitial(Strict):
     """Seeded random initial state: positions uniform in a region, headings uniform in a
-    range, speeds uniform in a range (models with a common speed ignore the speeds)."""
+    range, speeds uniform in a range (models with a common speed ignore the speeds). In 3D
+    the directions are uniform on the sphere (heading_range is then left at its default)."""
 
     kind: Literal["random"] = "random"
     N: PositiveInt = Field(description="Number of agents.", le=MAX_AGENTS)
@@ -117,20 +161,38 @@ class ExplicitInitial(Strict):
     """Initial state given as arrays in agent-id order."""
 
     kind: Literal["explicit"] = "explicit"
-    positions: list[Vec2] = Field(min_length=1, description="N positions (x, y).")
-    headings: list[Real] | None = Field(default=None, description="N headings (radians).")
-    velocities: list[Vec2] | None = Field(default=None, description="N velocities (vx, vy).")
+    positions: list[Point] = Field(
+        min_length=1, description="N positions (x, y), or (x, y, z) in 3D.")
+    headings: list[Real] | None = Field(
+        default=None, description="N headings (radians; 2D only).")
+    velocities: list[Point] | None = Field(
+        default=None, description="N velocities (vx, vy), or (vx, vy, vz) in 3D.")
 
     @property
     def N(self) -> int:
         return len(self.positions)
 
+    @property
+    def dimension(self) -> int:
+        return len(self.positions[0])
+
     @field_validator("positions")
     @classmethod
-    def _magnitude(cls, v: list[tuple[float, float]]) -> list[tuple[float, float]]:
-        for k, (x, y) in enumerate(v):
-            if abs(x) > MAX_ABS_COORD or abs(y) > MAX_ABS_COORD:
+    def _magnitude(cls, v: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
+        for k, p in enumerate(v):
+            if max(abs(c) for c in p) > MAX_ABS_COORD:
                 raise ValueError(f"positions[{k}] exceeds {MAX_ABS_COORD:g} in magnitude")
+        return v
+
+    @field_validator("positions", "velocities")
+    @classmethod
+    def _one_dimension(cls, v: list[tuple[float, ...]] | None, info: ValidationInfo
+                       ) -> list[tuple[float, ...]] | None:
+        # Every row as long as the first: one dimension for the whole state.
+        for k, row in enumerate(v or ()):
+            if len(row) != len(v[0]):
+                raise ValueError(f"{info.field_name}[{k}] has {len(row)} coordinates, "
+                                 f"{info.field_name}[0] has {len(v[0])}")
         return v
 
     @model_validator(mode="after")
@@ -139,6 +201,11 @@ class ExplicitInitial(Strict):
             arr = getattr(self, name)
             if arr is not None and len(arr) != self.N:
                 raise ValueError(f"{name} has {len(arr)} entries, positions has {self.N}")
+        if self.velocities is not None and len(self.velocities[0]) != self.dimension:
+            raise ValueError(f"velocities have {len(self.velocities[0])} coordinates, "
+                             f"positions {self.dimension}")
+        if self.headings is not None and self.dimension != 2:
+            raise ValueError("headings are angles in the plane: give velocities in 3D")
         return self
 
 

@@ -275,6 +275,7 @@ class FlockingParams(DoubleIntegratorParams):
         "on a fixed graph or the proximity graph |r_ij| < R."
     )
     paper_inclusive: ClassVar[bool] = False
+    dimensions: ClassVar[tuple[int, ...]] = (2, 3)
 
     kind: Literal["flocking"] = "flocking"
     topology: Literal["fixed", "switching"] = Field(

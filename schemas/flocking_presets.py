@@ -107,3 +107,25 @@ def tanner_obstacles() -> dict:
         "recording": {"every": 100, "arrays": ["position", "velocity"], "observables_every": 10},
         "seed": 10,
     }
+
+
+@register_preset(
+    "tjp-switching-3d",
+    "examples/flocking_3d.json: paper 000's switching law in 3D, 1000 agents from a "
+    "jittered cubic lattice, R = 2, d = 1, 20 s.",
+)
+def tjp_switching_3d() -> dict:
+    return {
+        "name": "tjp-switching-3d",
+        "model": {"kind": "flocking", "topology": "switching",
+                  "potential": {"kind": "log_barrier", "d": 1.0}},
+        "space": {"kind": "plane", "dimension": 3},
+        "neighbours": {"radius": 2.0},
+        "initial": {"kind": "random", "N": 1000, "speed_range": [0.0, 1.0],
+                    "region": {"kind": "lattice", "low": [0.0, 0.0, 0.0], "spacing": 1.1,
+                               "jitter": 0.2}},
+        "time": {"steps": 2000, "dt": 0.01},
+        "recording": {"every": 100, "arrays": ["position", "velocity"], "observables_every": 10},
+        "seed": 1,
+        "backend": "cpu",
+    }

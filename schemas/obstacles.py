@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Annotated, ClassVar, Literal
 import pydantic
 from pydantic import Field, StrictBool
 
-from .base import NonNegativeReal, PositiveInt, PositiveReal, Strict, Vec2
+from .base import NonNegativeReal, Point, PositiveInt, PositiveReal, Strict
 from .catalog import register_model
 from .flocking import DoubleIntegratorParams, PotentialSpec, check_radius_exceeds_d
 
@@ -32,9 +32,10 @@ Kappa = Annotated[float, Field(ge=1.0, le=100.0, allow_inf_nan=False), pydantic.
 
 
 class DiscObstacle(Strict):
-    """A disc obstacle: delta = |r_i - center| - radius is the distance to its boundary."""
+    """A disc obstacle (in 3D a sphere): delta = |r_i - center| - radius is the distance to
+    its boundary."""
 
-    center: Vec2 = Field(description="Centre r_o (length).")
+    center: Point = Field(description="Centre r_o (length; 3 coordinates in 3D).")
     radius: PositiveReal = Field(description="Radius rho (length).")
 
 
@@ -55,18 +56,21 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
         "around point and disc obstacles, halving their radius when stuck."
     )
     paper_inclusive: ClassVar[bool] = True
+    dimensions: ClassVar[tuple[int, ...]] = (2, 3)
+    dimensions_note: ClassVar[str] = "in 3D: point and sphere obstacles (discs with 3D centres)"
 
     kind: Literal["flocking_obstacles"] = "flocking_obstacles"
     potential: PotentialSpec = Field(
         default=PotentialSpec(kind="paper002"),
         description="Interaction potential U_ij below R_i (default paper 002's 1/s^2 + log s^2).",
     )
-    destination: Vec2 = Field(default=(0.0, 0.0), description="Destination r_d (length).")
-    obstacles: list[Vec2] = Field(
+    destination: Point = Field(default=(0.0, 0.0), description="Destination r_d (length).")
+    obstacles: list[Point] = Field(
         default=[], max_length=MAX_OBSTACLES, description="Point obstacles r_o (length)."
     )
     discs: list[DiscObstacle] = Field(
-        default=[], max_length=MAX_OBSTACLES, description="Disc obstacles (length)."
+        default=[], max_length=MAX_OBSTACLES,
+        description="Disc obstacles (length); spheres in 3D.",
     )
     obstacle_range: PositiveReal = Field(
         default=0.5,
@@ -121,14 +125,21 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
                 f"model.radius_floor = {self.radius_floor:g} exceeds the initial radius "
                 f"neighbours.radius = {radius:g}"
             )
-        dx, dy = self.destination
-        for k, (x, y) in enumerate(self.obstacles):
-            if x == dx and y == dy:
+        dim = scenario.dimension
+        points = [("destination", self.destination)]
+        points += [(f"obstacles[{k}]", o) for k, o in enumerate(self.obstacles)]
+        points += [(f"discs[{k}].center", d.center) for k, d in enumerate(self.discs)]
+        for name, point in points:
+            if len(point) != dim:
+                raise ValueError(f"model.{name} has {len(point)} coordinates; "
+                                 f"space.dimension is {dim}")
+        for k, o in enumerate(self.obstacles):
+            if tuple(o) == tuple(self.destination):
                 raise ValueError(
                     f"model.obstacles[{k}] lies on the destination: V_i is 0/0 there"
                 )
         for k, disc in enumerate(self.discs):
-            if math.hypot(dx - disc.center[0], dy - disc.center[1]) <= disc.radius:
+            if math.dist(self.destination, disc.center) <= disc.radius:
                 raise ValueError(f"model.discs[{k}] covers the destination {self.destination}")
         self._check_search(scenario)
         self._check_dt(scenario, None)

@@ -30,6 +30,10 @@ class Problem(BaseModel):
     errors: list[FieldError] | None = Field(default=None, description="Invalid fields.")
 
 
+# Fields whose cross-block checks (Scenario's model validator) start "<field>: message".
+CROSS_CHECKED = ("model", "space.dimension")
+
+
 def field_errors(exc: ValidationError, prefix: tuple[str | int, ...] = ()) -> list[FieldError]:
     """Every problem of a pydantic ValidationError, with dotted paths and readable messages."""
     out = []
@@ -39,8 +43,9 @@ def field_errors(exc: ValidationError, prefix: tuple[str | int, ...] = ()) -> li
         msg = e["msg"]
         if msg.startswith("Value error, "):
             msg = msg[len("Value error, ") :]
-        if not path and msg.startswith("model: "):  # a model's cross-block check
-            loc, msg = "model", msg[len("model: ") :]
+        for field in CROSS_CHECKED:  # a scenario's cross-block check names its field
+            if not path and msg.startswith(f"{field}: "):
+                loc, msg = field, msg[len(field) + 2 :]
         out.append(FieldError(loc=loc or "(root)", msg=msg, type=e["type"]))
     return out
 

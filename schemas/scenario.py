@@ -63,6 +63,11 @@ class Scenario(Strict):
         return self.initial.N
 
     @property
+    def dimension(self) -> int:
+        """2 or 3: the space's (every vector of the state has this many components)."""
+        return self.space.dimension
+
+    @property
     def inclusive(self) -> bool:
         """The neighbourhood test in force: the scenario's choice or the paper's."""
         chosen = self.neighbours.inclusive if self.neighbours else None
@@ -76,6 +81,24 @@ class Scenario(Strict):
         # Frames at 0, k, 2k, ... and always the final state.
         return self.time.steps // every + 1 + (1 if self.time.steps % every else 0)
 
+    def _check_dimension(self) -> None:
+        """The initial state's points have space.dimension coordinates."""
+        d = self.dimension
+        init = self.initial
+        if isinstance(init, ExplicitInitial):
+            if init.dimension != d:
+                raise ValueError(f"space.dimension: initial.positions have {init.dimension} "
+                                 f"coordinates, space.dimension is {d}")
+            return
+        region = init.region
+        if region is not None and region.dimension != d:
+            raise ValueError(f"space.dimension: initial.region {region.kind!r} is "
+                             f"{region.dimension}D, space.dimension is {d} (3D regions: "
+                             "box and lattice with 3 coordinates, ball)")
+        if d == 3 and init.heading_range != (-math.pi, math.pi):
+            raise ValueError("space.dimension: initial.heading_range is 2D; in 3D the "
+                             "initial directions are uniform on the sphere")
+
     @model_validator(mode="after")
     def _cross_checks(self) -> Scenario:
         n = self.n_agents
@@ -87,14 +110,16 @@ class Scenario(Strict):
                 f"> recording.max_frames = {self.recording.max_frames}"
             )
         init = self.initial
+        self._check_dimension()
         if isinstance(self.space, PeriodicBox) and not isinstance(init, ExplicitInitial):
             region = init.region
             if region is not None and region.kind in ("box", "lattice"):
                 lo = region.low
                 hi = region.high if region.kind == "box" else [
-                    c + region.spacing * math.ceil(math.sqrt(init.N)) for c in lo]
+                    c + region.spacing * region.side(init.N) for c in lo]
                 if min(lo) < 0 or max(hi) > self.space.L:
-                    raise ValueError("initial.region must lie inside the periodic box [0, L]^2")
+                    raise ValueError("initial.region must lie inside the periodic box "
+                                     f"[0, L]^{self.dimension}")
         if (
             not isinstance(init, ExplicitInitial)
             and init.region is None
@@ -122,6 +147,11 @@ class Scenario(Strict):
                 raise ValueError(
                     f"recording.observables: {', '.join(unknown)} not reported by model "
                     f"{self.model.kind}; it reports {', '.join(known)}")
+        dims = type(self.model).dimensions
+        if self.dimension not in dims:
+            raise ValueError(
+                f"space.dimension: model {self.model.kind} runs in dimension "
+                f"{' or '.join(map(str, dims))}, not {self.dimension}")
         try:
             self.model.check_scenario(self)
         except ValueError as exc:

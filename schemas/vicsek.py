@@ -7,6 +7,8 @@ Heading rules over the closed neighbourhood N_i ∪ {i}, N_i = {j : |r_ij| <= r}
   laplacian theta   <- theta - (1/g) L theta,  g > N                (eq. 17-18)
   leader    theta_i <- (theta_i + sum_{N_i} theta_j + b_i theta_0) / (1 + n_i + b_i)   (eq. 22)
 xi_i is uniform in [-eta/2, eta/2] (optional for the JLM rules, whose theorems are noise-free).
+In 3D (rule vicsek only) the noise turns the mean direction to a direction uniform in the
+spherical cap of half-angle eta/2 around it (docs/MODELS_3D.md).
 """
 
 from __future__ import annotations
@@ -39,6 +41,9 @@ class VicsekParams(ModelParams):
     observables: ClassVar[tuple[str, ...] | None] = (
         "polarization", "heading_spread", "leader_error", "components", "degree_mean",
         "degree_min", "degree_max", "isolated", "linked_intervals")
+    dimensions: ClassVar[tuple[int, ...]] = (2, 3)
+    dimensions_note: ClassVar[str] = (
+        "3D for rule vicsek only: average, laplacian and leader act on angles (2D)")
 
     kind: Literal["vicsek"] = "vicsek"
     rule: Rule = Field(default="vicsek", description="Heading update rule.")
@@ -49,7 +54,8 @@ class VicsekParams(ModelParams):
                    StrictFloat] = Field(
         default=0.0,
         description="Noise amplitude: xi uniform in [-eta/2, eta/2] (radians), per agent "
-        "and step. 0 for the JLM theorems.",
+        "and step; in 3D a direction uniform in the spherical cap of half-angle eta/2 "
+        "around the mean. 0 for the JLM theorems.",
     )
     g: PositiveReal | None = Field(
         default=None, description="Laplacian rule gain denominator; must exceed N (eq. 18)."
@@ -72,6 +78,10 @@ class VicsekParams(ModelParams):
         if scenario.neighbours is None:
             raise ValueError("model vicsek needs a neighbours block with the radius r")
         n = scenario.n_agents
+        if scenario.dimension != 2 and self.rule != "vicsek":
+            raise ValueError(
+                f"rule {self.rule!r} averages headings as angles and runs in 2D only; "
+                f"space.dimension = {scenario.dimension} needs rule 'vicsek'")
         if self.rule == "laplacian":
             if self.g is None:
                 raise ValueError(f"rule 'laplacian' needs g > N = {n} (eq. 18)")

@@ -50,3 +50,19 @@ def jlm_leader() -> dict:
         "recording": {"every": 10, "arrays": ["position", "heading"]},
         "seed": 2,
     }
+
+
+@register_preset("vicsek-3d", "examples/vicsek_3d.json: 10^5 Vicsek agents in the periodic "
+                 "cube, density 4, r = 1, eta = 0.5 (spherical-cap noise), 200 steps.")
+def vicsek_3d() -> dict:
+    return {
+        "name": "vicsek-3d",
+        "model": {"kind": "vicsek", "rule": "vicsek", "v0": 0.03, "eta": 0.5},
+        "space": {"kind": "periodic", "L": (100_000 / 4) ** (1 / 3), "dimension": 3},
+        "neighbours": {"radius": 1.0},
+        "initial": {"kind": "random", "N": 100000},
+        "time": {"steps": 200, "dt": 1.0},
+        "recording": {"every": 50, "arrays": ["position", "heading"], "observables_every": 10},
+        "seed": 42,
+        "backend": "cpu",
+    }

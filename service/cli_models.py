@@ -36,6 +36,8 @@ def print_model(m: dict[str, Any]) -> None:
           f"(paper's choice); state: {', '.join(m['state'])}")
     if m.get("observables"):
         print(f"  observables: {', '.join(m['observables'])}")
+    note = f" ({m['dimensions_note']})" if m.get("dimensions_note") else ""
+    print(f"  dimensions: {', '.join(map(str, m['dimensions']))}{note}")
     print(f"  details: {docs['details']}")
     print("  parameters:")
     for p in m["parameters"]:

@@ -2,10 +2,12 @@
 
 Layout (H5MD 1.1, https://www.nongnu.org/h5md/h5md.html):
   /h5md                      version, author, creator
-  /particles/swarm/box       dimension = 2, boundary = periodic|none (x2), edges = [L, L]
-  /particles/swarm/<array>   step (F,), time (F,), value (F, N, 2) or (F, N)
-                             array: position, velocity, heading (heading is flocklab's)
-  /particles/swarm/image     step, time, value (F, N, 2) int32: periodic image of each
+  /particles/swarm/box       dimension = D (2 or 3: space.dimension),
+                             boundary = periodic|none (xD), edges = [L] * D
+  /particles/swarm/<array>   step (F,), time (F,), value (F, N, D) or (F, N)
+                             array: position, velocity, heading (heading is flocklab's:
+                             (F, N) angles in 2D, (F, N, 3) unit vectors in 3D)
+  /particles/swarm/image     step, time, value (F, N, D) int32: periodic image of each
                              agent, so position + image * edges is its unwrapped track
                              (written when exact: see `image_is_exact`)
   /observables/<name>        step (T,), time (T,), value (T,)
@@ -76,13 +78,14 @@ class H5MDWriter:
             units.attrs["system"] = "SI"
         self.swarm = self.f.create_group("particles/swarm")
         box = self.swarm.create_group("box")
-        box.attrs["dimension"] = 2
+        dim = scenario.dimension
+        box.attrs["dimension"] = dim
         if isinstance(scenario.space, PeriodicBox):
-            box.attrs["boundary"] = np.array([b"periodic", b"periodic"])
-            edges = box.create_dataset("edges", data=np.array([scenario.space.L] * 2))
+            box.attrs["boundary"] = np.array([b"periodic"] * dim)
+            edges = box.create_dataset("edges", data=np.array([scenario.space.L] * dim))
             self._unit(edges, self.length_unit)
         else:
-            box.attrs["boundary"] = np.array([b"none", b"none"])
+            box.attrs["boundary"] = np.array([b"none"] * dim)
         params = self.f.create_group("parameters/flocklab")
         params.attrs["scenario"] = scenario.model_dump_json()
         self.frames = 0
@@ -110,7 +113,8 @@ class H5MDWriter:
         dtype = np.int32 if name == "image" else self.dtype
         ds = g.create_dataset("value", shape=(0, *shape), maxshape=(None, *shape),
                               dtype=dtype, chunks=(1, *shape), **self.compression)
-        unit = {"position": self.length_unit, "heading": "rad",
+        # A 3D heading is a unit vector, without a unit.
+        unit = {"position": self.length_unit, "heading": "rad" if value.ndim == 1 else None,
                 "velocity": self._velocity_unit()}.get(name)
         self._unit(ds, unit)
 

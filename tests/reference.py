@@ -21,6 +21,8 @@ def adjacency(pos: np.ndarray, r: float, L: float | None, inclusive: bool) -> np
     """Boolean A[i, j]: j is a neighbour of i (i != j)."""
     d = displacements(pos, L)
     d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
+    if pos.shape[1] == 3:
+        d2 = d2 + d[..., 2] * d[..., 2]
     a = d2 <= r * r if inclusive else d2 < r * r
     np.fill_diagonal(a, False)
     return a
@@ -45,6 +47,41 @@ def vicsek_step(pos, theta, *, rule, r, L, inclusive, v0dt, eta=0.0, g=None, the
         new[0] = theta0
     phi = new if move_new else theta
     x = pos + v0dt * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    if L is not None:
+        x = np.mod(x, L)
+    return x, new
+
+
+def cap_turn(m: np.ndarray, u1: np.ndarray, u2: np.ndarray, eta: float) -> np.ndarray:
+    """Rows of m (unit 3-vectors) turned to directions uniform in the spherical cap of
+    half-angle eta/2: 1 - cos t = u1 (1 - cos(eta/2)), azimuth 2 pi u2 measured from
+    b1 = the unit part of e_x (e_y where |m_x| > 1/2) normal to m, towards b2 = m x b1."""
+    h = u1 * (1.0 - np.cos(eta / 2))
+    ct, st = 1.0 - h, np.sqrt(np.maximum(0.0, h * (2.0 - h)))
+    axis = np.zeros_like(m)
+    axis[np.abs(m[:, 0]) > 0.5, 1] = 1.0
+    axis[np.abs(m[:, 0]) <= 0.5, 0] = 1.0
+    b1 = axis - (axis * m).sum(axis=1, keepdims=True) * m
+    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
+    b2 = np.cross(m, b1)
+    phi = 2 * np.pi * u2
+    return ct[:, None] * m + st[:, None] * (np.cos(phi)[:, None] * b1
+                                            + np.sin(phi)[:, None] * b2)
+
+
+def vicsek_step_3d(pos, e, *, r, L, inclusive, v0dt, eta=0.0, u1=None, u2=None,
+                   move_new=False):
+    """One synchronous 3D Vicsek step: e_i' = the closed neighbourhood's mean direction,
+    turned into the spherical cap of half-angle eta/2 (uniforms u1, u2 per agent)."""
+    a = adjacency(pos, r, L, inclusive)
+    closed = a | np.eye(len(pos), dtype=bool)
+    s = closed.astype(np.float64) @ e
+    norm = np.linalg.norm(s, axis=1)
+    m = np.zeros_like(s)
+    m[:, 0] = 1.0  # a zero sum keeps the x axis (as atan2(0, 0) = 0 in 2D)
+    m[norm > 0] = s[norm > 0] / norm[norm > 0, None]
+    new = cap_turn(m, u1, u2, eta) if eta > 0 else m
+    x = pos + v0dt * (new if move_new else e)
     if L is not None:
         x = np.mod(x, L)
     return x, new

@@ -24,9 +24,10 @@ TOL = 1e-10
 # --- references ---------------------------------------------------------------------------
 
 def pair_geometry(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """d[i, j] = r_j - r_i and s2[i, j] = |r_ij|^2."""
+    """d[i, j] = r_j - r_i and s2[i, j] = |r_ij|^2 (2 or 3 coordinates)."""
     d = x[None, :, :] - x[:, None, :]
-    return d, d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
+    s2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
+    return d, s2 + d[..., 2] * d[..., 2] if x.shape[1] == 3 else s2
 
 
 def potential_force(d: np.ndarray, s2: np.ndarray, mask: np.ndarray, a: float) -> np.ndarray:
@@ -57,11 +58,12 @@ def navigation_ref(x, dest, centers, radii, d, kappa):
     """V_i and grad V_i (paper 002, p. 3) for every agent, all obstacles, by brute force."""
     lam = (d * d + 1.0) / (d * d)
     V = np.empty(len(x))
-    G = np.empty((len(x), 2))
+    G = np.empty_like(x)
     for i, xi in enumerate(x):
         if len(centers):
             rel = xi - centers
-            dist = np.hypot(rel[:, 0], rel[:, 1])
+            dist = np.hypot(rel[:, 0], rel[:, 1]) if x.shape[1] == 2 else np.sqrt(
+                (rel * rel).sum(axis=1))
             delta = dist - radii
             m = delta**2 < d**2  # m = 1/2 (sign(d^2 - delta^2) + 1)
             e = delta - d
@@ -72,7 +74,7 @@ def navigation_ref(x, dest, centers, radii, d, kappa):
             B = np.prod(beta)
             gB = (np.prod(others, axis=1)[:, None] * gbeta).sum(axis=0)
         else:
-            B, gB = 1.0, np.zeros(2)
+            B, gB = 1.0, np.zeros(x.shape[1])
         y = xi - dest
         a = y @ y
         D = a**kappa + B
@@ -90,7 +92,8 @@ class M3Ref:
     def __init__(self, p, R0: float, inclusive: bool):
         self.p = p
         self.a, _ = p.potential.coefficients()
-        self.centers = np.array([*p.obstacles, *(c.center for c in p.discs)]).reshape(-1, 2)
+        self.centers = np.array([*p.obstacles, *(c.center for c in p.discs)]).reshape(
+            -1, len(p.destination))
         self.radii = np.array([0.0] * len(p.obstacles) + [c.radius for c in p.discs])
         self.inclusive = inclusive
         self.R0 = R0
@@ -123,7 +126,7 @@ class M3Ref:
         """Eq. 4, synchronously."""
         p = self.p
         V, _ = self.nav(x)
-        stuck = (v[:, 0] ** 2 + v[:, 1] ** 2 < p.stuck_speed**2) & (V > p.V_min)
+        stuck = ((v * v).sum(axis=1) < p.stuck_speed**2) & (V > p.V_min)
         _, s2 = pair_geometry(x)
         r2 = self.pair_r(R) ** 2
         near = (s2 <= r2 if self.inclusive else s2 < r2) & ~np.eye(len(x), dtype=bool)

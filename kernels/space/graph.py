@@ -11,7 +11,7 @@ import numpy as np
 import taichi as ti
 
 from ..runtime import as_real
-from .grid import Grid, make_visitor, within
+from .grid import Grid, make_visitor, row, within
 
 nd = ti.types.ndarray()
 
@@ -74,7 +74,7 @@ def count_roots(parent: nd) -> ti.i32:
 
 
 @cache
-def metric_graph_kernel(inclusive: bool, periodic: bool, by_id: bool):
+def metric_graph_kernel(inclusive: bool, periodic: bool, by_id: bool, dim: int = 2):
     """Kernel: for the metric graph |d| < r (or <= r) on a built grid, write each agent's
     degree (bucket order) and union every edge into `parent`, indexed by storage slot
     (cache-friendly; enough for this step's components) or by agent id (for unions that
@@ -100,7 +100,7 @@ def metric_graph_kernel(inclusive: bool, periodic: bool, by_id: bool):
                 acc[1] = link(parent, acc[1], rk)
         return acc
 
-    visit = make_visitor(pair, half=True)
+    visit = make_visitor(pair, half=True, dim=dim)
 
     @ti.kernel
     def graph(pos: nd, ids: nd, parent: nd, deg: nd, r2: nd,
@@ -108,7 +108,7 @@ def metric_graph_kernel(inclusive: bool, periodic: bool, by_id: bool):
         for i in range(pos.shape[0]):
             deg[i] = 0
         for i in range(pos.shape[0]):
-            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+            xi = row(pos, i, dim)
             acc = ti.math.ivec2(0, find(parent, node(ids, i)))
             acc = visit(i, xi, acc, pos, ti.static((start, cid, gf, gi)),
                         ti.static((ids, parent, deg, r2)), periodic)
@@ -120,9 +120,9 @@ def metric_graph_kernel(inclusive: bool, periodic: bool, by_id: bool):
 class MetricGraph:
     """Components and degrees of the graph |r_ij| < r (or <=) over the same grid."""
 
-    def __init__(self, n: int, radius: float, inclusive: bool, periodic: bool):
-        self.kernel = metric_graph_kernel(inclusive, periodic, False)
-        self.kernel_by_id = metric_graph_kernel(inclusive, periodic, True)
+    def __init__(self, n: int, radius: float, inclusive: bool, periodic: bool, dim: int = 2):
+        self.kernel = metric_graph_kernel(inclusive, periodic, False, dim)
+        self.kernel_by_id = metric_graph_kernel(inclusive, periodic, True, dim)
         self.r2 = ti.ndarray(float, shape=1)
         self.r2.from_numpy(as_real([radius * radius]))
         self.parent = ti.ndarray(ti.i32, shape=n)

@@ -1,9 +1,13 @@
 """Uniform-grid neighbour search: count -> scan -> stable scatter -> visit.
 
+One source for 2D and 3D: the dimension (`dim`, 2 or 3) is a compile-time parameter, and
+every position is a dim-vector. The 2D specialisation does exactly the arithmetic, in the
+same order, that the 2D-only grid did (the bits of every 2D run are unchanged).
+
 Build (once per step, from the positions in their current storage order):
-  1. every agent gets a cell, and a bucket (the periodic box: cell index itself; the
-     unbounded plane: a hash of the cell's integer coordinates, so a swarm spread over
-     10^6 radii costs no memory per unit of area);
+  1. every agent gets a cell, and a bucket (the periodic box or cube: cell index itself;
+     unbounded space: a hash of the cell's integer coordinates, so a swarm spread over
+     10^6 radii costs no memory per unit of area or volume);
   2. an exclusive scan of the bucket counts gives each bucket's start;
   3. a *stable* scatter gives each agent its slot in bucket order (`perm`).
 The engine then permutes the state into bucket order, so neighbour reads are contiguous,
@@ -11,7 +15,7 @@ and that order is the next step's storage order. Stability makes the order, and 
 every floating-point sum, identical run to run: the same seed gives the same trajectory.
 
 Visit: `make_visitor(pair)` returns a Taichi function that calls `pair` for every agent k
-in the 3x3 block of cells around agent i, with the minimum-image displacement
+in the 3x3 block (3D: 3x3x3) of cells around agent i, with the minimum-image displacement
 d = r_k - r_i. `pair` applies the distance test itself (models differ: < or <=, per-agent
 radii). On the plane, hash collisions are filtered by comparing exact cell ids, so no
 agent is ever visited twice. No bucket has a fixed capacity: nothing can overflow.
@@ -35,8 +39,10 @@ from ..runtime import DevicePolicy
 nd = ti.types.ndarray()
 # Cells a hair wider than the radius, per precision (see above).
 _WIDEN = {"float64": 1.0 + 1e-9, "float32": 1.0 + 2.0**-7}
-# Beyond this many cells across, i32 cell coordinates (and float precision) run out.
+# Beyond this many cells across, i32 cell coordinates (and float precision) run out; in 3D
+# three coordinates share the 64-bit cell id, 21 bits each.
 _MAX_CELLS_ACROSS = {"float64": 2**30, "float32": 2**14}
+MAX_CELLS_ACROSS_3D = 2**20
 
 
 def widen() -> float:
@@ -45,15 +51,16 @@ def widen() -> float:
     return _WIDEN[runtime.current().precision]
 
 
-def max_cells_across() -> int:
+def max_cells_across(dim: int = 2) -> int:
     """Cells across beyond which a swarm counts as runaway in the running precision."""
-    return _MAX_CELLS_ACROSS[runtime.current().precision]
+    limit = _MAX_CELLS_ACROSS[runtime.current().precision]
+    return limit if dim == 2 else min(limit, MAX_CELLS_ACROSS_3D)
 
 
-def runaway_cause(extent: float) -> str:
+def runaway_cause(extent: float, dim: int = 2) -> str:
     """The one wording of a runaway swarm, on every path, in the running precision."""
-    limit = max_cells_across().bit_length() - 1
-    tail = "; float32's limit: precision float64 allows 2^30" if limit < 30 else ""
+    limit = max_cells_across(dim).bit_length() - 1
+    tail = "; float32's limit: precision float64 allows 2^30" if limit < 20 else ""
     return (f"the swarm spans {extent:.3g} length units, over 2^{limit} neighbour radii "
             f"(agents escaping: dt too large or forces unbounded{tail})")
 PERIODIC_REACH = 1  # cells per radius in the periodic box
@@ -64,9 +71,27 @@ def _next_pow2(x: int) -> int:
 
 
 @ti.func
-def plane_cell(x, y, gf: ti.template()):
+def row(a: ti.template(), k, dim: ti.template()):
+    """Row k of an (N, dim) array as a dim-vector."""
+    v = ti.Vector.zero(float, dim)
+    for c in ti.static(range(dim)):
+        v[c] = a[k, c]
+    return v
+
+
+@ti.func
+def space_cell(xi, gf: ti.template()):
+    """Integer cell coordinates of point xi in unbounded space (origin gf[2:], width gf[0])."""
     inv = 1.0 / gf[0]
-    return ti.math.ivec2(int(ti.floor((x - gf[2]) * inv)), int(ti.floor((y - gf[3]) * inv)))
+    c = ti.Vector.zero(ti.i32, xi.n)
+    for a in ti.static(range(xi.n)):
+        c[a] = int(ti.floor((xi[a] - gf[2 + a]) * inv))
+    return c
+
+
+@ti.func
+def plane_cell(x, y, gf: ti.template()):
+    return space_cell(ti.math.vec2(x, y), gf)
 
 
 @ti.func
@@ -83,64 +108,104 @@ def plane_bucket(cx, cy, mask):
 
 
 @ti.func
-def periodic_cell(x, y, gf: ti.template(), nc):
+def cell_id(c):
+    """The exact 64-bit id of cell c (2 or 3 coordinates, each >= -1)."""
+    res = ti.i64(0)
+    if ti.static(c.n == 2):
+        res = plane_cell_id(c[0], c[1])
+    else:  # 21 bits a coordinate: MAX_CELLS_ACROSS_3D + 2 fits
+        res = (ti.cast(c[0] + 1, ti.i64) | (ti.cast(c[1] + 1, ti.i64) << 21)
+               | (ti.cast(c[2] + 1, ti.i64) << 42))
+    return res
+
+
+@ti.func
+def cell_bucket(c, mask):
+    """The hash bucket of cell c (the 3D hash adds Teschner et al.'s third prime)."""
+    res = 0
+    if ti.static(c.n == 2):
+        res = plane_bucket(c[0], c[1], mask)
+    else:
+        h = ((ti.cast(c[0], ti.u32) * ti.u32(73856093))
+             ^ (ti.cast(c[1], ti.u32) * ti.u32(19349663))
+             ^ (ti.cast(c[2], ti.u32) * ti.u32(83492791)))
+        h ^= h >> ti.u32(13)
+        res = ti.cast(h & ti.cast(mask, ti.u32), ti.i32)
+    return res
+
+
+@ti.func
+def periodic_cell(xi, gf: ti.template(), nc):
     inv = 1.0 / gf[0]
     # x < L, yet x / cell can round up to nc for an x within rounding of L (in float32,
     # about one agent per step at N = 10^7): that agent is in the last cell, and "% nc"
     # alone would put it in cell 0, across the seam from its neighbours.
-    return ti.math.ivec2(ti.min(int(ti.floor(x * inv)), nc - 1) % nc,
-                         ti.min(int(ti.floor(y * inv)), nc - 1) % nc)
+    c = ti.Vector.zero(ti.i32, xi.n)
+    for a in ti.static(range(xi.n)):
+        c[a] = ti.min(int(ti.floor(xi[a] * inv)), nc - 1) % nc
+    return c
+
+
+@ti.func
+def flat_cell(c, nc):
+    """Bucket of periodic cell c: x fastest, so x-adjacent cells are adjacent buckets."""
+    res = c[0] + nc * c[1]
+    if ti.static(c.n == 3):
+        res = c[0] + nc * (c[1] + nc * c[2])
+    return res
 
 
 _BBOX_BLOCK = 4096  # agents per block of the bounding-box reduction
 
 
 @ti.kernel
-def _bbox_blocks(pos: nd, part: nd):
+def _bbox_blocks(pos: nd, part: nd, dim: ti.template()):
     # Each block reduces its agents serially in registers; one shared atomic min/max per
     # agent instead cost 130 ms at N = 10^6 (every thread hammering the same four words).
     for blk in range(part.shape[0]):
-        lo = ti.math.vec2(ti.math.inf)
-        hi = ti.math.vec2(-ti.math.inf)
+        lo = ti.Vector([ti.math.inf] * dim, float)
+        hi = ti.Vector([-ti.math.inf] * dim, float)
         for i in range(blk * _BBOX_BLOCK, ti.min((blk + 1) * _BBOX_BLOCK, pos.shape[0])):
-            p = ti.math.vec2(pos[i, 0], pos[i, 1])
+            p = row(pos, i, dim)
             lo = ti.min(lo, p)
             hi = ti.max(hi, p)
-        part[blk, 0] = lo[0]
-        part[blk, 1] = lo[1]
-        part[blk, 2] = hi[0]
-        part[blk, 3] = hi[1]
+        for c in ti.static(range(dim)):
+            part[blk, c] = lo[c]
+            part[blk, dim + c] = hi[c]
 
 
-def bbox_buffer(n: int) -> ti.Ndarray:
+def bbox_buffer(n: int, dim: int = 2) -> ti.Ndarray:
     """Scratch for `bounding_box` of N agents (owned by a grid: Taichi arrays must not
     outlive the runtime that made them)."""
-    return ti.ndarray(float, shape=(-(-n // _BBOX_BLOCK), 4))
+    return ti.ndarray(float, shape=(-(-n // _BBOX_BLOCK), 2 * dim))
 
 
 def bounding_box(pos: ti.Ndarray, part: ti.Ndarray) -> np.ndarray:
-    """(min x, min y, max x, max y) of an (N, 2) array: exact and order-independent."""
-    _bbox_blocks(pos, part)
+    """(min x, min y, max x, max y) of an (N, 2) array, (min x, min y, min z, max x, ...)
+    of an (N, 3) one: exact and order-independent."""
+    dim = part.shape[1] // 2
+    _bbox_blocks(pos, part, dim)
     p = part.to_numpy()
-    return np.array([p[:, 0].min(), p[:, 1].min(), p[:, 2].max(), p[:, 3].max()])
+    return np.concatenate([p[:, :dim].min(axis=0), p[:, dim:].max(axis=0)])
 
 
 @ti.kernel
 def _assign(
-    pos: nd, key: nd, cid: nd, count: nd, gf: nd, gi: nd, periodic: ti.template()
+    pos: nd, key: nd, cid: nd, count: nd, gf: nd, gi: nd, periodic: ti.template(),
+    dim: ti.template()
 ):
     for b in range(count.shape[0]):
         count[b] = 0
     for i in range(pos.shape[0]):
         b = 0
+        xi = row(pos, i, dim)
         if ti.static(periodic):
             nc = gi[0]
-            c = periodic_cell(pos[i, 0], pos[i, 1], gf, nc)
-            b = c[0] + nc * c[1]
+            b = flat_cell(periodic_cell(xi, gf, nc), nc)
         else:
-            c = plane_cell(pos[i, 0], pos[i, 1], gf)
-            b = plane_bucket(c[0], c[1], gi[1])
-            cid[i] = plane_cell_id(c[0], c[1])
+            c = space_cell(xi, gf)
+            b = cell_bucket(c, gi[1])
+            cid[i] = cell_id(c)
         key[i] = b
         ti.atomic_add(count[b], 1)
 
@@ -200,10 +265,20 @@ def permute(src: nd, dst: nd, perm: nd):
         dst[perm[i]] = src[i]
 
 
-class Grid:
-    """Neighbour grid for N agents with interaction radius `radius`.
+def _icbrt(x: int) -> int:
+    """floor(x^(1/3)) for a non-negative integer, exactly."""
+    m = round(x ** (1.0 / 3.0))
+    while m**3 > x:
+        m -= 1
+    while (m + 1) ** 3 <= x:
+        m += 1
+    return m
 
-    `periodic_L` set: the box [0, L)^2 with wrap-around; None: the unbounded plane.
+
+class Grid:
+    """Neighbour grid for N agents with interaction radius `radius`, in `dim` = 2 or 3.
+
+    `periodic_L` set: the box [0, L)^dim with wrap-around; None: unbounded space.
     After `build(pos)`, `perm[i]` is agent i's slot in bucket order, and `view()` is what a
     visitor needs (bucket starts, cell ids, geometry) as a static tuple for kernels.
     `policy.serial_scatter` picks the scatter: serial stable (the CPU's) or atomic slots then
@@ -211,8 +286,9 @@ class Grid:
     """
 
     def __init__(self, n: int, radius: float, periodic_L: float | None,
-                 policy: DevicePolicy):
+                 policy: DevicePolicy, dim: int = 2):
         self.n = n
+        self.dim = dim
         self.radius = float(radius)
         self.periodic = periodic_L is not None
         self.serial = policy.serial_scatter
@@ -225,18 +301,20 @@ class Grid:
             L = float(periodic_L)
             # Cap the cell count near 4 per agent: a sparse box then gets wider cells
             # (more candidates each) instead of memory per unit of area.
-            nc = max(1, min(int(L / cell), math.isqrt(max(4 * n, 16))))
+            root = math.isqrt if dim == 2 else _icbrt
+            nc = max(1, min(int(L / cell), root(max(4 * n, 16))))
             self.nc = nc
-            n_buckets = nc * nc
+            n_buckets = nc**dim
             cell = L / nc
         else:
             L = 0.0
             self.nc = 0
             n_buckets = _next_pow2(2 * n)
         self.n_buckets = n_buckets
-        self.gf = np.array([cell, L, 0.0, 0.0], dtype=runtime.real())
+        # gf: cell width, L, then the origin of unbounded space's cells (dim coordinates).
+        self.gf = np.array([cell, L] + [0.0] * dim, dtype=runtime.real())
         self.gi = np.array([self.nc, n_buckets - 1], dtype=np.int32)
-        self._gf_nd = ti.ndarray(float, shape=4)
+        self._gf_nd = ti.ndarray(float, shape=2 + dim)
         self._gi_nd = ti.ndarray(ti.i32, shape=2)
         self._gi_nd.from_numpy(self.gi)
         self._gf_nd.from_numpy(self.gf)
@@ -249,20 +327,22 @@ class Grid:
         self.cid = ti.ndarray(ti.i64, shape=n if not self.periodic else 1)
         self.cid_sorted = ti.ndarray(ti.i64, shape=n if not self.periodic else 1)
         self._src = None if self.serial else ti.ndarray(ti.i32, shape=n)
-        self._bb_part = None if self.periodic else bbox_buffer(n)
+        self._bb_part = None if self.periodic else bbox_buffer(n, dim)
 
     def build(self, pos: ti.Ndarray, step: int = 0) -> None:
-        """Bucket the agents at `pos` ((N, 2), current storage order) and compute `perm`."""
+        """Bucket the agents at `pos` ((N, dim), current storage order), compute `perm`."""
         if not self.periodic:
+            d = self.dim
             bb = bounding_box(pos, self._bb_part)
-            extent = max(bb[2] - bb[0], bb[3] - bb[1])
+            extent = max(bb[d + c] - bb[c] for c in range(d))
             if not np.isfinite(extent):
                 raise SimulationDiverged(step, "position", "a position became non-finite")
-            if extent / self.gf[0] > max_cells_across():
-                raise SimulationDiverged(step, "position", runaway_cause(extent))
-            self.gf[2], self.gf[3] = bb[0], bb[1]
+            if extent / self.gf[0] > max_cells_across(d):
+                raise SimulationDiverged(step, "position", runaway_cause(extent, d))
+            self.gf[2:] = bb[:d]
             self._gf_nd.from_numpy(self.gf)
-        _assign(pos, self.key, self.cid, self.count, self._gf_nd, self._gi_nd, self.periodic)
+        _assign(pos, self.key, self.cid, self.count, self._gf_nd, self._gi_nd, self.periodic,
+                self.dim)
         _scan(self.count, self.start, self.cursor)
         if self.serial:
             _scatter_serial(self.key, self.cursor, self.perm)
@@ -276,99 +356,129 @@ class Grid:
         return (self.start, self.cid_sorted, self._gf_nd, self._gi_nd)
 
 
-def make_visitor(pair, half: bool = False):
+@ti.func
+def _image(pos: ti.template(), k, xi, s, first: ti.template()):
+    """d = pos[k] + s - xi per component, the shift s skipped below component `first`
+    (the same additions, in the same order, as the 2D-only code wrote out)."""
+    d = ti.Vector.zero(float, xi.n)
+    for a in ti.static(range(xi.n)):
+        if ti.static(a < first):
+            d[a] = pos[k, a] - xi[a]
+        else:
+            d[a] = pos[k, a] + s[a] - xi[a]
+    return d
+
+
+@ti.func
+def _wrap(b, nc, L):
+    """Cell coordinate b folded into [0, nc), and the shift (0 or +-L) that makes the
+    folded cell's agents the images nearest to a point of the unfolded cell."""
+    shift = 0.0
+    if b < 0:
+        b += nc
+        shift = -L
+    elif b >= nc:
+        b -= nc
+        shift = L
+    return b, shift
+
+
+def make_visitor(pair, half: bool = False, dim: int = 2):
     """Return a Taichi function `visit(i, xi, acc, pos, G, S, periodic)` that folds
-    `acc = pair(i, k, d, acc, S)` over every agent k in the cells around position xi,
-    where pos is in bucket order and d = pos[k] - xi (minimum image in the box).
+    `acc = pair(i, k, d, acc, S)` over every agent k in the cells around position xi
+    (a dim-vector), where pos is in bucket order and d = pos[k] - xi (minimum image in the
+    box).
 
     `half=True` visits each unordered pair once, from its first member: only the cells
-    "after" i's (the rest of its row, and the rows above) and, in i's own cell, k > i.
-    Symmetric relations (degrees, components) then cost half the candidates."""
+    "after" i's (the rest of its row, the rows above in its layer and, in 3D, the layers
+    above) and, in i's own cell, k > i. Symmetric relations (degrees, components) then cost
+    half the candidates.
+
+    The z layers of 3D are unrolled at compile time (`e` a Python int, 0 alone in 2D), so
+    2D compiles to the 2D-only code's loops."""
+    R = PERIODIC_REACH
+    box_layers = range(0 if half else -R, R + 1) if dim == 3 else range(1)
+    plane_layers = range(0 if half else -1, 2) if dim == 3 else range(1)
 
     @ti.func
     def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
               periodic: ti.template()):
         start, cid, gf, gi = ti.static(G[0], G[1], G[2], G[3])
-        R = ti.static(PERIODIC_REACH)
         if ti.static(periodic):
             nc = gi[0]
             L = gf[1]
-            c = periodic_cell(xi[0], xi[1], gf, nc)
+            c = periodic_cell(xi, gf, nc)
             if nc >= 2 * R + 1:
                 # Rows of x-adjacent cells are one contiguous bucket range unless the row
                 # crosses the seam; a cell across the seam is read with the shift +-L
                 # that makes r_k + shift the image nearest r_i.
-                for b in range(ti.static(0 if half else -R), R + 1):
-                    by = c[1] + b
-                    sy = 0.0
-                    if by < 0:
-                        by += nc
-                        sy = -L
-                    elif by >= nc:
-                        by -= nc
-                        sy = L
-                    row = nc * by
-                    a0 = -R
-                    if ti.static(half):
-                        if b == 0:
-                            a0 = 0  # own cell and those to its right
-                    if c[0] + a0 >= 0 and c[0] + R < nc:
-                        k0 = start[row + c[0] + a0]
-                        if ti.static(half):
+                for e in ti.static(box_layers):
+                    s = ti.Vector.zero(float, dim)
+                    layer = 0
+                    if ti.static(dim == 3):
+                        bz, sz = _wrap(c[2] + e, nc, L)
+                        s[2] = sz
+                        layer = nc * nc * bz
+                    own_layer = ti.static(half and e == 0)
+                    for b in range(ti.static(0 if own_layer else -R), R + 1):
+                        by, sy = _wrap(c[1] + b, nc, L)
+                        s[1] = sy
+                        row0 = nc * by + layer
+                        a0 = -R
+                        if ti.static(own_layer):
                             if b == 0:
-                                k0 = i + 1
-                        for k in range(k0, start[row + c[0] + R + 1]):
-                            d = ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] + sy - xi[1])
-                            acc = pair(i, k, d, acc, S)
-                    else:
-                        for a in range(a0, R + 1):
-                            bx = c[0] + a
-                            sx = 0.0
-                            if bx < 0:
-                                bx += nc
-                                sx = -L
-                            elif bx >= nc:
-                                bx -= nc
-                                sx = L
-                            k0 = start[row + bx]
-                            if ti.static(half):
-                                if b == 0 and a == 0:
+                                a0 = 0  # own cell and those to its right
+                        if c[0] + a0 >= 0 and c[0] + R < nc:
+                            k0 = start[row0 + c[0] + a0]
+                            if ti.static(own_layer):
+                                if b == 0:
                                     k0 = i + 1
-                            for k in range(k0, start[row + bx + 1]):
-                                d = ti.math.vec2(pos[k, 0] + sx - xi[0],
-                                                 pos[k, 1] + sy - xi[1])
-                                acc = pair(i, k, d, acc, S)
+                            for k in range(k0, start[row0 + c[0] + R + 1]):
+                                acc = pair(i, k, _image(pos, k, xi, s, 1), acc, S)
+                        else:
+                            for a in range(a0, R + 1):
+                                bx, sx = _wrap(c[0] + a, nc, L)
+                                s[0] = sx
+                                k0 = start[row0 + bx]
+                                if ti.static(own_layer):
+                                    if b == 0 and a == 0:
+                                        k0 = i + 1
+                                for k in range(k0, start[row0 + bx + 1]):
+                                    acc = pair(i, k, _image(pos, k, xi, s, 0), acc, S)
             else:
                 # At most 2R cells across: visit each once, minimum image per pair.
-                for a in range(nc):
-                    for b in range(nc):
-                        bucket = (c[0] + a) % nc + nc * ((c[1] + b) % nc)
-                        for k in range(start[bucket], start[bucket + 1]):
-                            if ti.static(half):
-                                if k <= i:
-                                    continue
-                            d = ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] - xi[1])
-                            d -= L * ti.round(d / L)
-                            acc = pair(i, k, d, acc, S)
+                for off in ti.grouped(ti.ndrange(*([nc] * dim))):
+                    bucket = flat_cell((c + off) % nc, nc)
+                    for k in range(start[bucket], start[bucket + 1]):
+                        if ti.static(half):
+                            if k <= i:
+                                continue
+                        d = row(pos, k, dim) - xi
+                        d -= L * ti.round(d / L)
+                        acc = pair(i, k, d, acc, S)
         else:
-            c = plane_cell(xi[0], xi[1], gf)
-            for b in range(ti.static(0 if half else -1), 2):
-                ty = c[1] + b
-                for a in range(-1, 2):
-                    if ti.static(half):
-                        if b == 0 and a < 0:
-                            continue
-                    tx = c[0] + a
-                    want = plane_cell_id(tx, ty)
-                    bucket = plane_bucket(tx, ty, gi[1])
-                    k0 = start[bucket]
-                    if ti.static(half):
-                        if a == 0 and b == 0:
-                            k0 = i + 1  # i's own cell: i is in this bucket
-                    for k in range(k0, start[bucket + 1]):
-                        if cid[k] == want:
-                            d = ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] - xi[1])
-                            acc = pair(i, k, d, acc, S)
+            c = space_cell(xi, gf)
+            t = c
+            for e in ti.static(plane_layers):
+                if ti.static(dim == 3):
+                    t[2] = c[2] + e
+                own_layer = ti.static(half and e == 0)
+                for b in range(ti.static(0 if own_layer else -1), 2):
+                    t[1] = c[1] + b
+                    for a in range(-1, 2):
+                        if ti.static(own_layer):
+                            if b == 0 and a < 0:
+                                continue
+                        t[0] = c[0] + a
+                        want = cell_id(t)
+                        bucket = cell_bucket(t, gi[1])
+                        k0 = start[bucket]
+                        if ti.static(own_layer):
+                            if a == 0 and b == 0:
+                                k0 = i + 1  # i's own cell: i is in this bucket
+                        for k in range(k0, start[bucket + 1]):
+                            if cid[k] == want:
+                                acc = pair(i, k, row(pos, k, dim) - xi, acc, S)
         return acc
 
     return visit

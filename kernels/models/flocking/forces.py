@@ -14,6 +14,9 @@ R_ij is
 Semi-implicit Euler (the default step): v' = v + dt u(r, v), r' = r + dt v'.
 `accel` kernels write u alone, for the RK4 stages (kernels/space/integrate.py).
 A non-finite result increments bad[0]; the caller raises SimulationDiverged.
+M2's kernels take the dimension `dim` (2 or 3) at compile time: the law needs only
+|r_ij| and the vectors r_ij, v_ij, so one source serves both (2D arithmetic unchanged).
+M3's navigation and adaptive radius take `dim` too.
 """
 
 from functools import cache
@@ -21,7 +24,7 @@ from functools import cache
 import taichi as ti
 
 from ...space.graph import find, link
-from ...space.grid import make_visitor, within
+from ...space.grid import make_visitor, row, within
 from ...space.params import Slots
 from ...space.plane_grid import make_dense_visitor
 from . import potentials
@@ -53,7 +56,16 @@ def pair_radius2(rule: ti.template(), i, k, rad: ti.template(), prm: ti.template
 @ti.func
 def nonfinite(x, v):
     s = x[0] + x[1] + v[0] + v[1]  # NaN if any term is NaN or infinite
+    if ti.static(x.n == 3):
+        s += x[2] + v[2]
     return ti.math.isnan(s) or ti.math.isinf(s)
+
+
+@ti.func
+def put(a: ti.template(), i, x):
+    """Row i of the (N, dim) array a = the dim-vector x."""
+    for c in ti.static(range(x.n)):
+        a[i, c] = x[c]
 
 
 def make_all_pairs_visitor(pair):
@@ -64,7 +76,7 @@ def make_all_pairs_visitor(pair):
     def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
               periodic: ti.template()):
         for k in range(pos.shape[0]):
-            acc = pair(i, k, ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] - xi[1]), acc, S)
+            acc = pair(i, k, row(pos, k, xi.n) - xi, acc, S)
         return acc
 
     return visit
@@ -74,17 +86,20 @@ VISITORS = {"all_pairs": make_all_pairs_visitor, "hash": make_visitor,
             "dense": make_dense_visitor}
 
 
-def visitor(pair, search: str):
-    """The neighbour loop for a search: all pairs, the engine's hashed grid, a DenseGrid."""
+def visitor(pair, search: str, dim: int = 2):
+    """The neighbour loop for a search: all pairs, the engine's hashed grid, a DenseGrid
+    (2D only)."""
+    if search == "hash":
+        return make_visitor(pair, dim=dim)
     return VISITORS[search](pair)
 
 
 @cache
 def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
-                 has_obstacles: bool, unit_kappa: bool, search: str):
+                 has_obstacles: bool, unit_kappa: bool, search: str, dim: int = 2):
     """(euler, accel) kernels over metric neighbours (`search`: all_pairs, hash, dense),
     specialised at compile time."""
-    navigation = make_navigation(has_obstacles, unit_kappa)
+    navigation = make_navigation(has_obstacles, unit_kappa, dim)
 
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):
@@ -97,18 +112,29 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
         w = ti.cast(within(s2, r2, inclusive) & other, float)  # j in N_i
         # U_ij = V(s) below R, constant (no force) from R on; select drops f(0) = inf.
         f = ti.select((s2 < r2) & other, potentials.force_factor(s2, prm[P.A]), 0.0)
-        return acc + ti.math.vec3(w * vel[k, 0] + f * d[0], w * vel[k, 1] + f * d[1], w)
+        t = ti.Vector.zero(float, dim + 1)
+        for c in ti.static(range(dim)):
+            t[c] = w * vel[k, c] + f * d[c]
+        t[dim] = w
+        return acc + t
 
-    visit = visitor(pair, search)
+    visit = visitor(pair, search, dim)
 
     @ti.func
     def control(i, xi, vi, pos: ti.template(), vel: ti.template(), rad: ti.template(),
                 prm: ti.template(), nav: ti.template(), G: ti.template(), OB: ti.template()):
-        sums = visit(i, xi, ti.math.vec3(0.0), pos, G, ti.static((vel, rad, prm)), False)
-        acc = ti.math.vec2(sums[0], sums[1]) - sums[2] * vi
+        sums = visit(i, xi, ti.Vector.zero(float, dim + 1), pos, G,
+                     ti.static((vel, rad, prm)), False)
+        acc = ti.Vector.zero(float, dim)
+        for c in ti.static(range(dim)):
+            acc[c] = sums[c]
+        acc -= sums[dim] * vi
         if ti.static(mission):
             nv = navigation(xi, nav, OB)
-            acc -= ti.math.vec2(nv[1], nv[2])
+            grad = ti.Vector.zero(float, dim)
+            for c in ti.static(range(dim)):
+                grad[c] = nv[1 + c]
+            acc -= grad
             if ti.static(damping == EVERYWHERE):
                 acc -= prm[P.CD] * vi
             elif ti.static(damping == ABOVE_VMIN):
@@ -124,14 +150,14 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
               start: nd, cid: nd, gf: nd, gi: nd,
               opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
         for i in range(pos.shape[0]):
-            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
-            vi = ti.math.vec2(vel[i, 0], vel[i, 1])
+            xi = row(pos, i, dim)
+            vi = row(vel, i, dim)
             u = control(i, xi, vi, pos, vel, rad, prm, nav, ti.static((start, cid, gf, gi)),
                         ti.static((opos, orad, ostart, ocid, ogf, ogi)))
             v = vi + prm[P.DT] * u
             x = xi + prm[P.DT] * v
-            pos_out[i, 0], pos_out[i, 1] = x[0], x[1]
-            vel_out[i, 0], vel_out[i, 1] = v[0], v[1]
+            put(pos_out, i, x)
+            put(vel_out, i, v)
             if nonfinite(x, v):
                 ti.atomic_add(bad[0], 1)
 
@@ -140,11 +166,11 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
               start: nd, cid: nd, gf: nd, gi: nd,
               opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
         for i in range(pos.shape[0]):
-            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
-            vi = ti.math.vec2(vel[i, 0], vel[i, 1])
+            xi = row(pos, i, dim)
+            vi = row(vel, i, dim)
             u = control(i, xi, vi, pos, vel, rad, prm, nav, ti.static((start, cid, gf, gi)),
                         ti.static((opos, orad, ostart, ocid, ogf, ogi)))
-            acc_out[i, 0], acc_out[i, 1] = u[0], u[1]
+            put(acc_out, i, u)
             if nonfinite(u, xi):
                 ti.atomic_add(bad[0], 1)
 
@@ -154,50 +180,51 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
 @ti.func
 def _csr_control(i, xi, vi, pos: ti.template(), vel: ti.template(), indptr: ti.template(),
                  indices: ti.template(), prm: ti.template()):
-    acc = ti.math.vec2(0.0)
+    acc = ti.Vector.zero(float, xi.n)
     for e in range(indptr[i], indptr[i + 1]):
         j = indices[e]
-        d = ti.math.vec2(pos[j, 0] - xi[0], pos[j, 1] - xi[1])
-        acc += ti.math.vec2(vel[j, 0] - vi[0], vel[j, 1] - vi[1])
+        d = row(pos, j, xi.n) - xi
+        acc += row(vel, j, xi.n) - vi
         acc += potentials.force_factor(d.dot(d), prm[P.A]) * d
     return acc
 
 
 @ti.kernel
 def csr_euler(pos: nd, vel: nd, pos_out: nd, vel_out: nd, indptr: nd, indices: nd, prm: nd,
-              bad: nd):
+              bad: nd, dim: ti.template()):
     """One semi-implicit Euler step on a fixed graph (paper 000 eq. 1, 3)."""
     for i in range(pos.shape[0]):
-        xi = ti.math.vec2(pos[i, 0], pos[i, 1])
-        vi = ti.math.vec2(vel[i, 0], vel[i, 1])
+        xi = row(pos, i, dim)
+        vi = row(vel, i, dim)
         v = vi + prm[P.DT] * _csr_control(i, xi, vi, pos, vel, indptr, indices, prm)
         x = xi + prm[P.DT] * v
-        pos_out[i, 0], pos_out[i, 1] = x[0], x[1]
-        vel_out[i, 0], vel_out[i, 1] = v[0], v[1]
+        put(pos_out, i, x)
+        put(vel_out, i, v)
         if nonfinite(x, v):
             ti.atomic_add(bad[0], 1)
 
 
 @ti.kernel
-def csr_accel(pos: nd, vel: nd, acc_out: nd, indptr: nd, indices: nd, prm: nd, bad: nd):
+def csr_accel(pos: nd, vel: nd, acc_out: nd, indptr: nd, indices: nd, prm: nd, bad: nd,
+              dim: ti.template()):
     """u_i of eq. 3 on a fixed graph."""
     for i in range(pos.shape[0]):
-        xi = ti.math.vec2(pos[i, 0], pos[i, 1])
-        vi = ti.math.vec2(vel[i, 0], vel[i, 1])
+        xi = row(pos, i, dim)
+        vi = row(vel, i, dim)
         u = _csr_control(i, xi, vi, pos, vel, indptr, indices, prm)
-        acc_out[i, 0], acc_out[i, 1] = u[0], u[1]
+        put(acc_out, i, u)
         if nonfinite(u, xi):
             ti.atomic_add(bad[0], 1)
 
 
 @ti.kernel
-def csr_potential(pos: nd, indptr: nd, indices: nd, prm: nd, pot: nd):
+def csr_potential(pos: nd, indptr: nd, indices: nd, prm: nd, pot: nd, dim: ti.template()):
     """pot[i] = V_i = sum_{j in N_i} V(|r_ij|) (eq. 4)."""
     for i in range(pos.shape[0]):
         acc = 0.0
         for e in range(indptr[i], indptr[i + 1]):
             j = indices[e]
-            d = ti.math.vec2(pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1])
+            d = row(pos, j, dim) - row(pos, i, dim)
             acc += potentials.value(d.dot(d), prm[P.A], prm[P.C])
         pot[i] = acc
 
@@ -220,7 +247,7 @@ O_DEG, O_NEAR_D2, O_NEAR_K, O_VSUM, O_NSAT, O_ROOT = range(6)
 
 
 @cache
-def grid_observe_kernel(rule: int, inclusive: bool, search: str):
+def grid_observe_kernel(rule: int, inclusive: bool, search: str, dim: int = 2):
     """Kernel writing, per agent (grid order): valency |N_i|, the nearest agent among the
     visited candidates (squared distance and slot), sum_{j != i} (U_ij - V(R_ij)) (the
     saturated potential less its constant), and the union of every edge into `parent`
@@ -251,13 +278,13 @@ def grid_observe_kernel(rule: int, inclusive: bool, search: str):
                     acc[O_NSAT] += 1.0
         return acc
 
-    visit = visitor(pair, search)
+    visit = visitor(pair, search, dim)
 
     @ti.kernel
     def observe(pos: nd, rad: nd, prm: nd, parent: nd, deg: nd, near_d2: nd, near_k: nd,
                 pot: nd, start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
-            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
+            xi = row(pos, i, dim)
             acc = Observation(0.0, NEAREST_NONE, -1.0, 0.0, 0.0,
                               ti.cast(find(parent, i), float))
             acc = visit(i, xi, acc, pos, ti.static((start, cid, gf, gi)),
@@ -273,7 +300,7 @@ def grid_observe_kernel(rule: int, inclusive: bool, search: str):
 
 
 @cache
-def radius_kernel(rule: int, inclusive: bool, search: str):
+def radius_kernel(rule: int, inclusive: bool, search: str, dim: int = 2):
     """Adaptive radius, paper 002 eq. 4, synchronously (reads rad, writes rad_out):
     R_i' = max(R_i / 2, floor) if |v_i| < stuck_speed and V_i > V_min,
     R_i' = max(R_i, R_j for j in N_i) otherwise. counts += (halved, increased)."""
@@ -285,7 +312,7 @@ def radius_kernel(rule: int, inclusive: bool, search: str):
             acc = ti.max(acc, rad[k])
         return acc
 
-    visit = visitor(pair, search)
+    visit = visitor(pair, search, dim)
 
     @ti.kernel
     def update(pos: nd, vel: nd, rad: nd, rad_out: nd, mission: nd, prm: nd, counts: nd,
@@ -293,13 +320,15 @@ def radius_kernel(rule: int, inclusive: bool, search: str):
         for i in range(pos.shape[0]):
             r = rad[i]
             speed2 = vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1]
+            if ti.static(dim == 3):
+                speed2 += vel[i, 2] * vel[i, 2]
             new = r
             if speed2 < prm[P.STUCK2] and mission[i, 0] > prm[P.VMIN]:
                 new = ti.max(0.5 * r, prm[P.FLOOR])
                 if new < r:
                     ti.atomic_add(counts[0], 1)
             else:
-                new = visit(i, ti.math.vec2(pos[i, 0], pos[i, 1]), r, pos,
+                new = visit(i, row(pos, i, dim), r, pos,
                             ti.static((start, cid, gf, gi)), ti.static((rad, prm)), False)
                 if new > r:
                     ti.atomic_add(counts[1], 1)

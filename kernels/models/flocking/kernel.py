@@ -11,6 +11,8 @@ RK4 (kernels/space/integrate.py) with the neighbour sets re-evaluated at every s
 2-4 on a grid built at the stage positions).
 Observables at observation steps only: velocity statistics, W (eq. 5) or Q (eq. 10),
 valencies, components, lambda_2, and the closest pair.
+3D (space.dimension = 3, M2 only): the same kernels with dim = 3, the engine's hashed grid
+(the dense grid is 2D), and mean_velocity_z beside mean_velocity_x and _y.
 
 `FlockingKernel` is also the base of M3 (obstacles.py), which adds per-agent radii, the
 navigation function, damping and the adaptive radius through the hooks marked below.
@@ -27,8 +29,8 @@ from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
 from ...space.graph import count_roots, reset_parent
-from ...space.grid import permute, permute_rows
-from ...space.initial import InitialState, initial_state
+from ...space.grid import Grid, permute, permute_rows
+from ...space.initial import InitialState, initial_state, unit_rows
 from ...space.integrate import (
     count_nonfinite_pairs,
     gather_rows,
@@ -78,6 +80,7 @@ class FlockingKernel(ModelKernel):
         p = scenario.model
         self.p = p
         self.n = n = scenario.n_agents
+        self.dim = scenario.dimension
         self.dt = scenario.time.dt
         self.a, self.c = p.potential.coefficients()
         self.fixed = self._fixed_topology()
@@ -92,7 +95,7 @@ class FlockingKernel(ModelKernel):
         else:
             self._init_grid(scenario)
         if p.integrator == "rk4":
-            self.rk4 = {k: _real(n, 2) for k in ("xs", "vs", "a", "xk", "vk")}
+            self.rk4 = {k: _real(n, self.dim) for k in ("xs", "vs", "a", "xk", "vk")}
         else:
             self.rk4 = None
 
@@ -115,7 +118,7 @@ class FlockingKernel(ModelKernel):
 
     def _init_navigation(self) -> None:
         """No mission potential: empty obstacle grid and parameters (never read)."""
-        self.obstacles = ObstacleGrid(np.zeros((0, 2)), np.zeros(0), 1.0, self.policy)
+        self.obstacles = ObstacleGrid(np.zeros((0, self.dim)), np.zeros(0), 1.0, self.policy)
         self.nav = _real(NAV.size)
 
     def _before_motion(self, step: int) -> None:
@@ -157,9 +160,9 @@ class FlockingKernel(ModelKernel):
         self.all_pairs = self.p.uses_all_pairs(n)
         self.grid_radius = r = scenario.neighbours.radius
         # All pairs: the grid is never built; its arrays only fill the kernels' signature.
-        self.grid = PlaneGrid(1 if self.all_pairs else n, r, self.policy)
+        self.grid = self._new_grid(1 if self.all_pairs else n, r)
         rk4_grid = self.p.integrator == "rk4" and not self.all_pairs
-        self.stage_grid = PlaneGrid(n, r, self.policy) if rk4_grid else None
+        self.stage_grid = self._new_grid(n, r) if rk4_grid else None
         self.per_agent_radius = flags["rule"] != RADIUS_RULES["uniform"]
         self._no_rad = _real(1)
         self.parent, self.labels = _i32(n), _i32(n)
@@ -167,18 +170,24 @@ class FlockingKernel(ModelKernel):
         self.near_d2 = _real(n)
         self.stage = None
 
+    def _new_grid(self, n: int, r: float) -> PlaneGrid | Grid:
+        """The plane's grid (dense or hashed), or in 3D the engine's hashed grid."""
+        if self.dim == 3:
+            return Grid(n, r, None, self.policy, dim=3)
+        return PlaneGrid(n, r, self.policy)
+
     # --- stepping -----------------------------------------------------------------------
 
     def _rad(self) -> ti.Ndarray:
         return self.state["rad"] if self.per_agent_radius else self._no_rad
 
-    def _search(self, grid: PlaneGrid) -> str:
+    def _search(self, grid: PlaneGrid | Grid) -> str:
         """The visitor for positions bucketed in `grid` (all pairs: no grid)."""
-        return "all_pairs" if self.all_pairs else grid.layout
+        return "all_pairs" if self.all_pairs else getattr(grid, "layout", "hash")
 
-    def _kernels(self, grid: PlaneGrid):
+    def _kernels(self, grid: PlaneGrid | Grid):
         """(euler, accel) for the grid's current layout (compiled once per layout)."""
-        return grid_kernels(**self.flags, search=self._search(grid))
+        return grid_kernels(**self.flags, search=self._search(grid), dim=self.dim)
 
     def _sort(self, step: int) -> None:
         """Grid order for this step's positions (fixed graphs and all pairs need none)."""
@@ -196,7 +205,7 @@ class FlockingKernel(ModelKernel):
             self._rk4_step(step, pos_out, vel_out)
         elif self.fixed:
             csr_euler(st["pos"], st["vel"], pos_out, vel_out, self.indptr, self.indices,
-                      self.prm, self.bad)
+                      self.prm, self.bad, self.dim)
         else:
             euler, _ = self._kernels(self.grid)
             euler(st["pos"], st["vel"], self._rad(), pos_out, vel_out, self.prm, self.nav,
@@ -227,7 +236,7 @@ class FlockingKernel(ModelKernel):
         whose grid is built; otherwise a stage grid is built at pos and undone after (all
         pairs: no grid, pos is read as it is)."""
         if self.fixed:
-            csr_accel(pos, vel, out, self.indptr, self.indices, self.prm, self.bad)
+            csr_accel(pos, vel, out, self.indptr, self.indices, self.prm, self.bad, self.dim)
             return
         if at_state or self.all_pairs:
             _, accel = self._kernels(self.grid)
@@ -236,7 +245,8 @@ class FlockingKernel(ModelKernel):
             return
         if self.stage is None:
             n = self.n
-            self.stage = {"pos": _real(n, 2), "vel": _real(n, 2), "a": _real(n, 2),
+            d = self.dim
+            self.stage = {"pos": _real(n, d), "vel": _real(n, d), "a": _real(n, d),
                           "rad": _real(n) if self.per_agent_radius else self._no_rad}
         s, g = self.stage, self.stage_grid
         g.build(pos, step)
@@ -258,7 +268,7 @@ class FlockingKernel(ModelKernel):
         obs = fo.velocity_stats(vel)
         kinetic = 0.5 * float((vel * vel).sum())
         if self.fixed:
-            csr_potential(st["pos"], self.indptr, self.indices, self.prm, self.pot)
+            csr_potential(st["pos"], self.indptr, self.indices, self.prm, self.pot, self.dim)
             obs["W"] = 0.5 * float(wide(self.pot).sum()) + kinetic  # eq. 5
             obs.update(self.graph_obs)
             self._closest(step, *fo.closest_pair(pos), obs)
@@ -272,7 +282,7 @@ class FlockingKernel(ModelKernel):
         ids = st.ids_numpy()
         reset_parent(self.parent)
         observe = grid_observe_kernel(self.flags["rule"], self.flags["inclusive"],
-                                      self._search(self.grid))
+                                      self._search(self.grid), self.dim)
         observe(st["pos"], self._rad(), self.prm, self.parent, self.deg, self.near_d2,
                 self.near_k, self.pot, *self.grid.view())
         deg = np.empty(self.n, dtype=np.int64)
@@ -282,7 +292,7 @@ class FlockingKernel(ModelKernel):
         obs = {"Q_reduced": reduced, "Q": reduced + self._q_constant(),
                "components": float(n_comp)}
         obs.update(fo.valency_stats(deg, self.p.valency_per_agent_max))
-        # The 3x3 cells hold every pair closer than the grid radius: exact below it.
+        # The 3x3 (3x3x3) cells hold every pair closer than the grid radius: exact below it.
         d2 = wide(self.near_d2)
         k = int(np.argmin(d2))
         if self.all_pairs or d2[k] < self.grid_radius**2:
@@ -321,7 +331,9 @@ class FlockingKernel(ModelKernel):
             vel = self.state.in_id_order("vel", ids)
             if "velocity" in arrays:
                 out["velocity"] = vel
-            if "heading" in arrays:
+            if "heading" in arrays and self.dim == 3:  # the unit velocity (N, 3)
+                out["heading"] = unit_rows(vel)
+            elif "heading" in arrays:
                 out["heading"] = np.arctan2(vel[:, 1], vel[:, 0])
         return out
 

@@ -16,6 +16,8 @@ so an obstacle with beta_o = 0 needs no division. Only obstacles with delta_o < 
 so obstacles are bucketed once in a uniform grid of cell d + max rho (kernels.space.grid, hashed:
 memory per obstacle, not per unit area) and an agent outside their bounding box (grown by
 one cell) skips the search: 10^4 obstacles and 10^6 agents cost O(N) per step.
+In 3D (dim = 3, the same source) the obstacles are points and spheres, and every vector
+above has three components.
 """
 
 from functools import cache
@@ -24,22 +26,28 @@ import numpy as np
 import taichi as ti
 
 from ...runtime import DevicePolicy, as_real
-from ...space.grid import Grid, make_visitor
+from ...space.grid import Grid, make_visitor, row
 from ...space.params import Slots
 
 nd = ti.types.ndarray()
 # The navigation parameter array: the obstacle range and its lambda, kappa, the destination
-# (DX, DY), and the obstacles' bounding box (X0, Y0, X1, Y1).
-NAV = Slots("RANGE", "LAMBDA", "KAPPA", "DX", "DY", "X0", "Y0", "X1", "Y1")
+# (DX, DY), and the obstacles' bounding box (X0, Y0, X1, Y1); in 3D also DZ, Z0, Z1.
+NAV = Slots("RANGE", "LAMBDA", "KAPPA", "DX", "DY", "X0", "Y0", "X1", "Y1", "DZ", "Z0", "Z1")
+DEST = (NAV.DX, NAV.DY, NAV.DZ)  # the destination's slots, by coordinate
+LOW = (NAV.X0, NAV.Y0, NAV.Z0)  # the bounding box's
+HIGH = (NAV.X1, NAV.Y1, NAV.Z1)
 # "No obstacle within reach" for the minimum boundary distance.
 FAR = 1e300
 
 
 def nav_parameters(destination, obstacle_range: float, kappa: float, bbox) -> np.ndarray:
-    x0, y0, x1, y1 = bbox
-    return NAV.pack(RANGE=obstacle_range, LAMBDA=(obstacle_range**2 + 1.0) / obstacle_range**2,
-                    KAPPA=kappa, DX=destination[0], DY=destination[1], X0=x0, Y0=y0, X1=x1,
-                    Y1=y1)
+    """bbox: (low..., high...) with one coordinate per dimension of the destination."""
+    dim = len(destination)
+    prm = NAV.pack(RANGE=obstacle_range, LAMBDA=(obstacle_range**2 + 1.0) / obstacle_range**2,
+                   KAPPA=kappa)
+    for c in range(dim):
+        prm[DEST[c]], prm[LOW[c]], prm[HIGH[c]] = destination[c], bbox[c], bbox[dim + c]
+    return prm
 
 
 class ObstacleGrid:
@@ -48,10 +56,11 @@ class ObstacleGrid:
     def __init__(self, centers: np.ndarray, radii: np.ndarray, obstacle_range: float,
                  policy: DevicePolicy):
         self.m = m = len(centers)
+        dim = centers.shape[1]
         cell = obstacle_range + (float(radii.max()) if m else 0.0)
         self.cell = cell
-        self.grid = Grid(max(m, 1), cell, None, policy)
-        pos = ti.ndarray(float, shape=(max(m, 1), 2))
+        self.grid = Grid(max(m, 1), cell, None, policy, dim)
+        pos = ti.ndarray(float, shape=(max(m, 1), dim))
         rad = ti.ndarray(float, shape=max(m, 1))
         if m:
             c = np.ascontiguousarray(centers, dtype=np.float64)
@@ -63,9 +72,9 @@ class ObstacleGrid:
             pos.from_numpy(as_real(sc))
             rad.from_numpy(as_real(sr))
             lo, hi = c.min(axis=0) - cell, c.max(axis=0) + cell
-            self.bbox = (lo[0], lo[1], hi[0], hi[1])
+            self.bbox = (*lo, *hi)
         else:
-            self.bbox = (0.0, 0.0, -1.0, -1.0)  # empty: no agent is ever inside
+            self.bbox = (0.0,) * dim + (-1.0,) * dim  # empty: no agent is ever inside
         self.pos, self.rad = pos, rad
 
     def view(self) -> tuple:
@@ -75,11 +84,12 @@ class ObstacleGrid:
 
 @ti.func
 def _obstacle_pair(i, k, d, acc, S: ti.template()):
-    """Fold obstacle k (d = r_o - x) into acc = (B, dB/dx, dB/dy, min delta)."""
+    """Fold obstacle k (d = r_o - x) into acc = (B, grad B, min delta)."""
     orad, nav = ti.static(S[0], S[1])
+    D = ti.static(d.n)
     dist = ti.sqrt(d.dot(d))
     delta = dist - orad[k]
-    acc[3] = ti.min(acc[3], delta)
+    acc[D + 1] = ti.min(acc[D + 1], delta)
     rng = nav[NAV.RANGE]
     if delta * delta < rng * rng:  # m = 1; otherwise m = 0 and beta = 1
         e = delta - rng
@@ -88,36 +98,44 @@ def _obstacle_pair(i, k, d, acc, S: ti.template()):
         dbeta = -2.0 * nav[NAV.LAMBDA] * e / (q * q)  # d beta / d delta
         g = (-dbeta / dist) * d  # grad_x beta = dbeta (x - r_o) / |x - r_o|
         b = acc[0]
-        acc[1] = acc[1] * beta + b * g[0]
-        acc[2] = acc[2] * beta + b * g[1]
+        for c in ti.static(range(D)):
+            acc[1 + c] = acc[1 + c] * beta + b * g[c]
         acc[0] = b * beta
     return acc
 
 
-_visit_obstacles = make_visitor(_obstacle_pair)
+_visit_obstacles = {dim: make_visitor(_obstacle_pair, dim=dim) for dim in (2, 3)}
 
 
 @cache
-def make_navigation(has_obstacles: bool, unit_kappa: bool):
-    """Taichi function navigation(x, nav, OB) -> (V, dV/dx, dV/dy, min delta) with OB the
-    obstacle grid's view; specialised for obstacle-free worlds and kappa = 1."""
+def make_navigation(has_obstacles: bool, unit_kappa: bool, dim: int = 2):
+    """Taichi function navigation(x, nav, OB) -> (V, grad V, min delta) (dim + 2 values)
+    with OB the obstacle grid's view; specialised for obstacle-free worlds and kappa = 1."""
+    visit_obstacles = _visit_obstacles[dim]
 
     @ti.func
     def navigation(xi, nav: ti.template(), OB: ti.template()):
-        acc = ti.math.vec4(1.0, 0.0, 0.0, FAR)
+        acc = ti.Vector.zero(float, dim + 2)
+        acc[0] = 1.0
+        acc[dim + 1] = FAR
         if ti.static(has_obstacles):
             opos, orad, start, cid, gf, gi = ti.static(OB[0], OB[1], OB[2], OB[3], OB[4], OB[5])
             inside = (nav[NAV.X0] <= xi[0]) & (xi[0] <= nav[NAV.X1]) & (nav[NAV.Y0] <= xi[1]) \
                 & (xi[1] <= nav[NAV.Y1])
+            if ti.static(dim == 3):
+                inside = inside & (nav[NAV.Z0] <= xi[2]) & (xi[2] <= nav[NAV.Z1])
             if inside:
-                acc = _visit_obstacles(0, xi, acc, opos, ti.static((start, cid, gf, gi)),
-                                       ti.static((orad, nav)), False)
+                acc = visit_obstacles(0, xi, acc, opos, ti.static((start, cid, gf, gi)),
+                                      ti.static((orad, nav)), False)
         b = acc[0]
-        gb = ti.math.vec2(acc[1], acc[2])
-        y = ti.math.vec2(xi[0] - nav[NAV.DX], xi[1] - nav[NAV.DY])
+        gb = ti.Vector.zero(float, dim)
+        y = ti.Vector.zero(float, dim)
+        for c in ti.static(range(dim)):
+            gb[c] = acc[1 + c]
+            y[c] = xi[c] - nav[DEST[c]]
         a = y.dot(y)
         v = 0.0
-        g = ti.math.vec2(0.0)
+        g = ti.Vector.zero(float, dim)
         if ti.static(unit_kappa):
             dd = a + b
             v = a / dd
@@ -129,23 +147,28 @@ def make_navigation(has_obstacles: bool, unit_kappa: bool):
             v = a * dk
             gd = 2.0 * kappa * ti.pow(a, kappa - 1.0) * y + gb
             g = dk * 2.0 * y - (a / kappa) * (dk / dd) * gd
-        return ti.math.vec4(v, g[0], g[1], acc[3])
+        out = ti.Vector.zero(float, dim + 2)
+        out[0] = v
+        for c in ti.static(range(dim)):
+            out[1 + c] = g[c]
+        out[dim + 1] = acc[dim + 1]
+        return out
 
     return navigation
 
 
 @cache
-def nav_eval_kernel(has_obstacles: bool, unit_kappa: bool):
-    """Kernel out[i] = (V, dV/dx, dV/dy, min delta) at points[i]."""
-    navigation = make_navigation(has_obstacles, unit_kappa)
+def nav_eval_kernel(has_obstacles: bool, unit_kappa: bool, dim: int = 2):
+    """Kernel out[i] = (V, grad V, min delta) at points[i]."""
+    navigation = make_navigation(has_obstacles, unit_kappa, dim)
 
     @ti.kernel
     def nav_eval(points: nd, out: nd, nav: nd, opos: nd, orad: nd, start: nd, cid: nd,
                  gf: nd, gi: nd):
         for i in range(points.shape[0]):
-            r = navigation(ti.math.vec2(points[i, 0], points[i, 1]), nav,
+            r = navigation(row(points, i, dim), nav,
                            ti.static((opos, orad, start, cid, gf, gi)))
-            for c in ti.static(range(4)):
+            for c in ti.static(range(dim + 2)):
                 out[i, c] = r[c]
 
     return nav_eval

@@ -24,6 +24,8 @@ def velocity_stats(vel: np.ndarray) -> dict[str, float]:
     the circular spread of the headings."""
     mean = vel.mean(axis=0)
     dev2 = ((vel - mean) ** 2).sum(axis=1)
+    if vel.shape[1] == 3:
+        return velocity_stats_3d(vel, mean, dev2)
     speed = np.hypot(vel[:, 0], vel[:, 1])
     return {
         "mean_velocity_x": float(mean[0]),
@@ -37,14 +39,42 @@ def velocity_stats(vel: np.ndarray) -> dict[str, float]:
     }
 
 
+def velocity_stats_3d(vel: np.ndarray, mean: np.ndarray, dev2: np.ndarray
+                      ) -> dict[str, float]:
+    """`velocity_stats` in 3D: mean_velocity_z joins _x and _y; the heading spread is twice
+    the largest angle between a velocity's direction and the mean direction (2 pi when the
+    mean is zero; zero velocities count as the x axis)."""
+    speed = np.linalg.norm(vel, axis=1)
+    e = np.zeros_like(vel)
+    e[:, 0] = 1.0
+    moving = speed > 0
+    e[moving] = vel[moving] / speed[moving, None]
+    s = e.sum(axis=0)
+    norm = float(np.linalg.norm(s))
+    spread = 2 * np.pi
+    if norm > 0:
+        spread = float(2 * np.arccos(np.clip((e @ (s / norm)).min(), -1.0, 1.0)))
+    return {
+        "mean_velocity_x": float(mean[0]),
+        "mean_velocity_y": float(mean[1]),
+        "mean_velocity_z": float(mean[2]),
+        "velocity_disagreement": float(dev2.sum()),
+        "velocity_disagreement_max": float(np.sqrt(dev2.max())),
+        "speed_min": float(speed.min()),
+        "speed_mean": float(speed.mean()),
+        "speed_max": float(speed.max()),
+        "heading_spread": spread,
+    }
+
+
 def component_disagreement(vel: np.ndarray, labels: np.ndarray) -> dict[str, float]:
     """Velocity disagreement within each connected component (paper 002: each component
     synchronises on its own): the sum over components and the largest |v_i - mean_k|.
     labels[i] in [0, N) names agent i's component."""
     # labels are slots of the component roots, in [0, N): bincount needs no relabelling.
     cnt = np.maximum(np.bincount(labels, minlength=len(labels)), 1).astype(np.float64)
-    mean = np.stack([np.bincount(labels, vel[:, c], len(labels)) / cnt for c in range(2)],
-                    axis=1)
+    mean = np.stack([np.bincount(labels, vel[:, c], len(labels)) / cnt
+                     for c in range(vel.shape[1])], axis=1)
     dev2 = ((vel - mean[labels]) ** 2).sum(axis=1)
     return {
         "velocity_disagreement_components": float(dev2.sum()),
@@ -114,6 +144,8 @@ def proximity_edges(pos: np.ndarray, radii: np.ndarray | float, rule: str,
     i, j = pairs[:, 0], pairs[:, 1]
     d = pos[j] - pos[i]
     s2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+    if pos.shape[1] == 3:
+        s2 = s2 + d[:, 2] * d[:, 2]
     if rule == "own":
         r2 = np.maximum(r[i], r[j]) ** 2  # j in N_i (R_i) or i in N_j (R_j)
     else:

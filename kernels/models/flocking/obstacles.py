@@ -35,8 +35,9 @@ class ObstacleFlockingKernel(FlockingKernel):
     def __init__(self, scenario: Scenario, policy: DevicePolicy):
         super().__init__(scenario, policy)
         p = self.p
-        self.nav_k = nav_eval_kernel(self.flags["has_obstacles"], self.flags["unit_kappa"])
-        self.mission = _real(self.n, 4)  # (V_i, grad V_i, min boundary distance)
+        self.nav_k = nav_eval_kernel(self.flags["has_obstacles"], self.flags["unit_kappa"],
+                                     self.dim)
+        self.mission = _real(self.n, self.dim + 2)  # (V_i, grad V_i, min boundary distance)
         self.counts = _i32(2)
         self.counts.fill(0)
         self.adaptive = p.adaptive_radius
@@ -64,7 +65,7 @@ class ObstacleFlockingKernel(FlockingKernel):
     def _init_navigation(self) -> None:
         p = self.p
         centers = np.array([*p.obstacles, *(d.center for d in p.discs)],
-                           dtype=np.float64).reshape(-1, 2)
+                           dtype=np.float64).reshape(-1, self.dim)
         radii = np.array([0.0] * len(p.obstacles) + [d.radius for d in p.discs])
         self.obstacles = ObstacleGrid(centers, radii, p.obstacle_range, self.policy)
         self.nav = _real(NAV.size)
@@ -82,7 +83,7 @@ class ObstacleFlockingKernel(FlockingKernel):
         st = self.state
         self._evaluate_mission()
         update = radius_kernel(self.flags["rule"], self.flags["inclusive"],
-                               self._search(self.grid))
+                               self._search(self.grid), self.dim)
         update(st["pos"], st["vel"], st["rad"], st.scratch("rad"), self.mission, self.prm,
                self.counts, *self.grid.view())
         st.swap("rad")
@@ -107,7 +108,11 @@ class ObstacleFlockingKernel(FlockingKernel):
         obs["Q_reduced"] += mission_sum  # eq. 5: + sum_i V_i
         obs["Q"] += mission_sum
         pos, vel, rad = wide(st["pos"]), wide(st["vel"]), wide(st["rad"])
-        dist = np.hypot(pos[:, 0] - self.p.destination[0], pos[:, 1] - self.p.destination[1])
+        if self.dim == 3:
+            dist = np.linalg.norm(pos - np.asarray(self.p.destination), axis=1)
+        else:
+            dist = np.hypot(pos[:, 0] - self.p.destination[0],
+                            pos[:, 1] - self.p.destination[1])
         cap = self.obstacles.cell
         obs.update({
             "destination_distance_mean": float(dist.mean()),
@@ -115,7 +120,7 @@ class ObstacleFlockingKernel(FlockingKernel):
             "inside_vmin_fraction": float(np.mean(m[:, 0] <= self.p.V_min)),
             "mission_potential_max": float(m[:, 0].max()),
             # Exact below the obstacle grid's cell; capped there (no obstacle closer).
-            "obstacle_distance_min": float(min(m[:, 3].min(), cap)),
+            "obstacle_distance_min": float(min(m[:, self.dim + 1].min(), cap)),
             "radius_min": float(rad.min()),
             "radius_mean": float(rad.mean()),
             "radius_max": float(rad.max()),

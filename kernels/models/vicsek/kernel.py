@@ -11,6 +11,12 @@ One step, synchronous for all agents (state at t read, state at t+1 written else
             own heading held at theta_0 (eq. 22: its b_i theta_0 term)
   x_i' = x_i + v0 dt (cos phi_i, sin phi_i), phi = theta (old, default) or theta'.
 xi_i = eta (u - 1/2), u from the counter-based hash of (seed, step, agent id).
+
+3D (rule vicsek only, the same source with dim = 3): e_i' = the mean direction s / |s|
+turned to a direction uniform in the spherical cap of half-angle eta/2 around it: polar
+angle t with cos t uniform in [cos(eta/2), 1] (uniform in area), azimuth uniform in
+[0, 2 pi), two counter-based draws (streams 0 and 1). docs/MODELS_3D.md relates it to the
+2D rule and to the vectorial noise of the literature.
 """
 
 from functools import cache
@@ -26,7 +32,7 @@ from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
 from ...space import rng
 from ...space.graph import MetricGraph, count_roots, find, link, reset_parent
-from ...space.grid import Grid, make_visitor, within
+from ...space.grid import Grid, make_visitor, row, within
 from ...space.initial import initial_state
 from ...space.params import Slots
 from ...space.state import SortedState
@@ -34,8 +40,9 @@ from .fused import VicsekBatch
 
 nd = ti.types.ndarray()
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
-# The parameter array: r^2, v0 dt, eta, g (laplacian), L (periodic box), theta_0 (leader).
-P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0")
+# The parameter array: r^2, v0 dt, eta, g (laplacian), L (periodic box), theta_0 (leader),
+# and 1 - cos(eta/2) (3D: the spherical cap's height).
+P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0", "CAP")
 _TWO_PI = 2 * np.pi
 
 
@@ -75,18 +82,38 @@ def _largest_gap(lo: nd, hi: nd) -> float:
     return ti.max(gap, first + _TWO_PI - last)
 
 
+@ti.func
+def cap_turn(m, u1, u2, cap):
+    """The unit 3-vector m turned to a direction uniform in the spherical cap around it of
+    height cap = 1 - cos(eta/2): 1 - cos t = u1 cap, azimuth 2 pi u2 about m."""
+    h = u1 * cap  # 1 - cos t, exact near t = 0 (no 1 - cos^2 cancellation)
+    ct = 1.0 - h
+    st = ti.sqrt(ti.max(0.0, h * (2.0 - h)))
+    # An orthonormal frame (m, b1, b2): b1 from the axis least aligned with m.
+    axis = ti.math.vec3(1.0, 0.0, 0.0)
+    if ti.abs(m[0]) > 0.5:
+        axis = ti.math.vec3(0.0, 1.0, 0.0)
+    b1 = ti.math.normalize(axis - axis.dot(m) * m)
+    b2 = m.cross(b1)
+    phi = 2.0 * ti.math.pi * u2
+    return ct * m + st * (ti.cos(phi) * b1 + ti.sin(phi) * b2)
+
+
 @cache
-def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with_graph: bool):
-    """Compile-time specialised step for one rule and geometry. `with_graph` also fills the
-    graph observables of G(t) from the same neighbour visit: each agent's degree, and the
-    union of every edge into `parent` (slot-indexed) for the components."""
+def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with_graph: bool,
+                dim: int = 2):
+    """Compile-time specialised step for one rule, geometry and dimension. `with_graph`
+    also fills the graph observables of G(t) from the same neighbour visit: each agent's
+    degree, and the union of every edge into `parent` (slot-indexed) for the components."""
 
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):
         ew, theta, prm, parent = ti.static(S[0], S[1], S[2], S[3])
         # Branch-free accumulation: w is 1 for a neighbour, 0 otherwise.
         w = ti.cast(within(d.dot(d), prm[P.R2], inclusive), float)
-        if ti.static(rule == RULES["vicsek"]):
+        if ti.static(rule == RULES["vicsek"] and dim == 3):
+            acc += w * ti.math.vec4(ew[k, 0], ew[k, 1], ew[k, 2], 1.0)
+        elif ti.static(rule == RULES["vicsek"]):
             acc += w * ti.math.vec3(ew[k, 0], ew[k, 1], 1.0)
         else:
             acc += w * ti.math.vec3(theta[k], 0.0, 1.0)
@@ -98,32 +125,41 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
                     link(parent, ri, rk)
         return acc
 
-    visit = make_visitor(pair)
+    visit = make_visitor(pair, dim=dim)
 
     @ti.kernel
     def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, ew_out: nd,
-             prm: nd, key: ti.u32, bad: nd, parent: nd, deg: nd,
+             prm: nd, key: ti.u32, key2: ti.u32, bad: nd, parent: nd, deg: nd,
              start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
-            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
-            acc = visit(i, xi, ti.math.vec3(0.0), pos, ti.static((start, cid, gf, gi)),
+            xi = row(pos, i, dim)
+            acc = visit(i, xi, ti.Vector.zero(float, dim + 1), pos,
+                        ti.static((start, cid, gf, gi)),
                         ti.static((ew, theta, prm, parent)), periodic)
             if ti.static(with_graph):
-                deg[i] = ti.cast(acc[2], ti.i32) - 1  # the closed neighbourhood holds i
+                deg[i] = ti.cast(acc[dim], ti.i32) - 1  # the closed neighbourhood holds i
             th = 0.0
             if ti.static(rule != RULES["vicsek"]):
                 th = theta[i]
             new = th
-            e_new = ti.math.vec2(1.0, 0.0)
+            e_new = ti.Vector.unit(dim, 0, float)
             if ti.static(rule == RULES["vicsek"]):
-                nrm = ti.sqrt(acc[0] * acc[0] + acc[1] * acc[1])
-                if nrm > 0.0:  # arg(0) = 0, as atan2(0, 0)
-                    e_new = ti.math.vec2(acc[0], acc[1]) / nrm
+                nrm2 = acc[0] * acc[0] + acc[1] * acc[1]
+                if ti.static(dim == 3):
+                    nrm2 += acc[2] * acc[2]
+                nrm = ti.sqrt(nrm2)
+                if nrm > 0.0:  # arg(0) = 0, as atan2(0, 0); in 3D the x axis
+                    for c in ti.static(range(dim)):
+                        e_new[c] = acc[c] / nrm
             elif ti.static(rule == RULES["laplacian"]):
                 new = th - (acc[2] * th - acc[0]) / prm[P.G]
             else:
                 new = acc[0] / acc[2]
-            if prm[P.ETA] > 0.0:
+            if ti.static(dim == 3):
+                if prm[P.ETA] > 0.0:
+                    e_new = cap_turn(e_new, rng.uniform(key, ids[i]),
+                                     rng.uniform(key2, ids[i]), prm[P.CAP])
+            elif prm[P.ETA] > 0.0:
                 noise = prm[P.ETA] * (rng.uniform(key, ids[i]) - 0.5)
                 if ti.static(rule == RULES["vicsek"]):
                     cx = ti.cos(noise)  # rotate e_new by the noise angle
@@ -138,23 +174,27 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
                     new = prm[P.THETA0]
             if ti.static(rule != RULES["vicsek"]):
                 e_new = ti.math.vec2(ti.cos(new), ti.sin(new))
-            e = ti.math.vec2(ew[i, 0], ew[i, 1])  # e(theta_i(t))
+            e = row(ew, i, dim)  # e(theta_i(t))
             if ti.static(move_new):
                 e = e_new
             x = xi + prm[P.V0DT] * e
             if ti.static(periodic):
                 L = prm[P.L]
                 x -= L * ti.floor(x / L)
-                for c in ti.static(range(2)):
+                for c in ti.static(range(dim)):
                     if x[c] >= L:  # x - L floor(x / L) can round up to L itself
                         x[c] -= L
-            pos_out[i, 0] = x[0]
-            pos_out[i, 1] = x[1]
+            for c in ti.static(range(dim)):
+                pos_out[i, c] = x[c]
             if ti.static(rule != RULES["vicsek"]):
                 theta_out[i] = new
-            ew_out[i, 0] = e_new[0]  # the unit vectors travel with the state: each heading's
-            ew_out[i, 1] = e_new[1]  # cos and sin are computed once, here
+            # The unit vectors travel with the state: each heading's cos and sin (2D) are
+            # computed once, here.
+            for c in ti.static(range(dim)):
+                ew_out[i, c] = e_new[c]
             v = new + x[0] + x[1] + e_new[0]  # NaN if any term is NaN or infinite
+            if ti.static(dim == 3):
+                v += x[2] + e_new[1] + e_new[2]
             if ti.math.isnan(v) or ti.math.isinf(v):
                 ti.atomic_add(bad[0], 1)
 
@@ -172,13 +212,17 @@ class VicsekKernel(ModelKernel):
         self.p = p
         self.n = n = scenario.n_agents
         self.periodic = isinstance(scenario.space, PeriodicBox)
+        self.dim = dim = scenario.dimension
         L = scenario.space.L if self.periodic else 0.0
         radius = scenario.neighbours.radius
         init = initial_state(scenario)
         theta = init.headings
         if p.rule == "leader":
             theta[0] = p.leader_heading
-        ew = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+        if dim == 3:  # rule vicsek (validated): the unit vectors are the state
+            ew = init.directions
+        else:
+            ew = np.stack([np.cos(theta), np.sin(theta)], axis=1)
         # The vicsek rule's headings are angles: the unit vectors are the whole state.
         arrays = {"pos": init.positions, "ew": ew}
         if p.rule != "vicsek":
@@ -186,21 +230,21 @@ class VicsekKernel(ModelKernel):
         self.state = SortedState(arrays)
         self._swap = tuple(arrays)
         self._no_theta = ti.ndarray(float, shape=1)  # stands in for theta (vicsek rule)
-        self.grid = Grid(n, radius, L if self.periodic else None, policy)
-        self.graph = MetricGraph(n, radius, scenario.inclusive, self.periodic)
+        self.grid = Grid(n, radius, L if self.periodic else None, policy, dim)
+        self.graph = MetricGraph(n, radius, scenario.inclusive, self.periodic, dim)
         self.prm = ti.ndarray(float, shape=P.size)
         self.prm.from_numpy(as_real(P.pack(
             R2=radius * radius, V0DT=p.v0 * scenario.time.dt, ETA=p.eta, G=p.g or 1.0, L=L,
-            THETA0=p.leader_heading,
+            THETA0=p.leader_heading, CAP=1.0 - np.cos(p.eta / 2),
         )))
         self.bad = ti.ndarray(ti.i32, shape=1)
-        if p.rule == "vicsek":
+        if p.rule == "vicsek" and dim == 2:
             self._arc_lo = ti.ndarray(float, shape=n)
             self._arc_hi = ti.ndarray(float, shape=n)
         variant = (RULES[p.rule], scenario.inclusive, self.periodic,
                    p.position_update == "new_heading")
-        self.kernel = step_kernel(*variant, False)
-        self.kernel_with_graph = step_kernel(*variant, True)
+        self.kernel = step_kernel(*variant, False, dim)
+        self.kernel_with_graph = step_kernel(*variant, True, dim)
         track = p.track_linked_intervals
         self.track = n <= 100_000 if track is None else track
         if self.track:
@@ -220,7 +264,8 @@ class VicsekKernel(ModelKernel):
         kernel(
             st["pos"], self._theta(st.cur), st["ew"], st.ids, st.scratch("pos"),
             self._theta(st.scratch_all()), st.scratch("ew"), self.prm,
-            rng.step_key(self.scenario.seed, 0, step), self.bad,
+            rng.step_key(self.scenario.seed, 0, step), rng.step_key(self.scenario.seed, 1, step),
+            self.bad,
             self.graph.parent, self.graph.deg, *self.grid.view(),
         )
         self._advanced_for = step
@@ -255,14 +300,17 @@ class VicsekKernel(ModelKernel):
         self.state.sort(self.grid, step)
         st = self.state
         e = wide(st["ew"])  # unit vectors e(theta_i); column sums: 15x numpy's sum(0)
-        obs = {"polarization": float(np.hypot(e[:, 0].sum(), e[:, 1].sum()) / self.n)}
-        if self.p.rule == "vicsek":
-            obs["heading_spread"] = self.circular_spread(st["ew"])
+        if self.dim == 3:
+            obs = self._observe_3d(e)
         else:
-            theta = wide(st["theta"])
-            obs["heading_spread"] = float(theta.max() - theta.min())
-        if self.p.rule == "leader":
-            obs["leader_error"] = float(np.abs(theta - self.p.leader_heading).max())
+            obs = {"polarization": float(np.hypot(e[:, 0].sum(), e[:, 1].sum()) / self.n)}
+            if self.p.rule == "vicsek":
+                obs["heading_spread"] = self.circular_spread(st["ew"])
+            else:
+                theta = wide(st["theta"])
+                obs["heading_spread"] = float(theta.max() - theta.min())
+            if self.p.rule == "leader":
+                obs["leader_error"] = float(np.abs(theta - self.p.leader_heading).max())
         # The graph observables come from the step's own neighbour visit: observing then
         # stepping costs one visit, not two (the last observation computes a step unused).
         self._advance(step, with_graph=True)
@@ -271,11 +319,29 @@ class VicsekKernel(ModelKernel):
             obs["linked_intervals"] = float(self.linked["count"])
         return obs
 
+    def _observe_3d(self, e: np.ndarray) -> dict[str, float]:
+        """Polarization |sum e_i| / N, and as the heading spread twice the largest angle
+        between a heading and the mean heading (0 exactly when all are aligned; an upper
+        bound on the angle between any two; 2 pi when the headings cancel)."""
+        s = np.array([e[:, c].sum() for c in range(3)])
+        norm = float(np.sqrt(s @ s))
+        spread = 2 * np.pi
+        if norm > 0:
+            spread = float(2 * np.arccos(np.clip((e @ (s / norm)).min(), -1.0, 1.0)))
+        return {"polarization": norm / self.n, "heading_spread": spread}
+
     def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
         ids = self.state.ids_numpy()
         out = {}
         if "position" in arrays:
             out["position"] = self.state.in_id_order("pos", ids)
+        if self.dim == 3:  # headings are the unit vectors (N, 3)
+            e = self.state.in_id_order("ew", ids)
+            if "heading" in arrays:
+                out["heading"] = e
+            if "velocity" in arrays:
+                out["velocity"] = self.p.v0 * e
+            return out
         if "heading" in arrays:
             out["heading"] = self._headings(ids)
         if "velocity" in arrays:
