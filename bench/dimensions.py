@@ -2,6 +2,9 @@
 density 4, r = 1, full noise, v0 = 0.5 (the hand-written peer kernel's workload).
 
     python -m bench.dimensions [N] [STEPS]       # default 10^6 agents, 20 steps
+
+The rate is the difference of a 5-step and a (5 + STEPS)-step run, which cancels set-up:
+meant for N >= 10^5, where the steps dominate (below, the difference is noise).
 """
 import json
 import sys
