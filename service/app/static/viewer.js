@@ -313,30 +313,36 @@ function showJob(job) {
   }
 }
 
-async function selectJob(id) {
+/** Follow one job or sweep in the panel: its events until it ends, then its results. */
+async function follow(kind, id, { plotTitle, frames, show, load }) {
   if (state.follow) state.follow.abort();
   stopPlayer();
-  state.selected = id;
-  state.selectedSweep = null;
+  state.selected = kind === "job" ? id : null;
+  state.selectedSweep = kind === "sweep" ? id : null;
   markSelected();
-  $("panel-kind").textContent = "Job";
-  $("plot-title").textContent = "Observables";
-  $("player").hidden = false;
+  $("panel-kind").textContent = kind === "job" ? "Job" : "Sweep";
+  $("plot-title").textContent = plotTitle;
+  $("player").hidden = !frames;  // a sweep has no frames of its own
   $("downloads").replaceChildren();
   clearPlot();
-  const follow = new AbortController();
-  state.follow = follow;
+  const ctl = new AbortController();
+  state.follow = ctl;
   let last = null;
   try {
-    await readEvents(`/v1/jobs/${id}/events`, follow.signal, (event, data) => {
-      if (event === "job") { last = JSON.parse(data); showJob(last); }
+    await readEvents(`/v1/${kind}s/${id}/events`, ctl.signal, (event, data) => {
+      if (event === kind) { last = JSON.parse(data); show(last); }
     });
   } catch (err) {
-    if (follow.signal.aborted) return;
+    if (ctl.signal.aborted) return;
     $("job-error").textContent = err.message;
     return;
   }
-  if (!follow.signal.aborted && last && last.results === "available") await loadResults(last);
+  if (!ctl.signal.aborted && last && last.results === "available") await load(last);
+}
+
+function selectJob(id) {
+  return follow("job", id, { plotTitle: "Observables", frames: true, show: showJob,
+                             load: loadResults });
 }
 
 async function readEvents(path, signal, onEvent) {
@@ -403,30 +409,9 @@ function showSweep(sw) {
   }
 }
 
-async function selectSweep(id) {
-  if (state.follow) state.follow.abort();
-  stopPlayer();
-  state.selected = null;
-  state.selectedSweep = id;
-  markSelected();
-  $("panel-kind").textContent = "Sweep";
-  $("plot-title").textContent = "Measures";
-  $("player").hidden = true;  // a sweep has no frames of its own
-  $("downloads").replaceChildren();
-  clearPlot();
-  const follow = new AbortController();
-  state.follow = follow;
-  let last = null;
-  try {
-    await readEvents(`/v1/sweeps/${id}/events`, follow.signal, (event, data) => {
-      if (event === "sweep") { last = JSON.parse(data); showSweep(last); }
-    });
-  } catch (err) {
-    if (follow.signal.aborted) return;
-    $("job-error").textContent = err.message;
-    return;
-  }
-  if (!follow.signal.aborted && last && last.results === "available") await loadSweepResults(last);
+function selectSweep(id) {
+  return follow("sweep", id, { plotTitle: "Measures", frames: false, show: showSweep,
+                               load: loadSweepResults });
 }
 
 async function loadSweepResults(sw) {
