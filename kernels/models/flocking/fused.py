@@ -170,7 +170,7 @@ def build_cells(a0, n, c0, cap, w0, src: ti.template(), may_hash: ti.template(),
             else:
                 cc = ti.max(ti.min(cx, nx - 1), 0) + nx * ti.max(ti.min(cy, ny - 1), 0)
             cell[i] = cc
-            cstart[c0 + cc + 1] += 1
+            cstart[c0 + cc + 1] = cstart[c0 + cc + 1] + 1
         _cell_sort(a0, n, c0, nb, cell, cstart, cidx, ())
     elif nx == 0:
         _in_id_order(a0, n, cidx, ())
@@ -531,7 +531,8 @@ def advance_kernel(mode: int):
             if vper != 0:
                 val[vbase + cidx[k] - a0] = ideg
             else:
-                val[vbase + ti.min(ideg, HIST - 1)] += 1
+                h = vbase + ti.min(ideg, HIST - 1)
+                val[h] = val[h] + 1
         obs[row, COL["valency_mean"]] = dsum / n
         obs[row, COL["valency_min"]] = dmin
         obs[row, COL["valency_max"]] = dmax
@@ -587,9 +588,9 @@ def advance_kernel(mode: int):
             # Paper 002: each component synchronises on its own.
             for k in range(a0, a0 + n):
                 root = find_serial(parent, k)
-                csum[root, 0] += ps[k, 2]
-                csum[root, 1] += ps[k, 3]
-                csum[root, 2] += 1.0
+                csum[root, 0] = csum[root, 0] + ps[k, 2]
+                csum[root, 1] = csum[root, 1] + ps[k, 3]
+                csum[root, 2] = csum[root, 2] + 1.0
             dev = 0.0
             dev_max = 0.0
             for k in range(a0, a0 + n):
@@ -687,7 +688,7 @@ def advance_kernel(mode: int):
                                            iprm, ps, cell, cstart, cidx, parent, csum,
                                            arc_lo, arc_hi, mis, obs, val,
                                            snap, sbase)
-                        iprm[b, IP.NOBS] += 1
+                        iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
                     if s < steps:
                         if ti.static(mission):
                             # Eq. 4 at its cadence, before the step's motion, synchronously
@@ -712,8 +713,8 @@ def advance_kernel(mode: int):
                                     rad[cidx[k]] = new
                                 for k in range(a0, a0 + n):
                                     ps[k, 4] = rad[cidx[k]]
-                                iprm[b, IP.HALVED] += halved
-                                iprm[b, IP.GROWN] += grown
+                                iprm[b, IP.HALVED] = iprm[b, IP.HALVED] + halved
+                                iprm[b, IP.GROWN] = iprm[b, IP.GROWN] + grown
                         bad = 0
                         for k in range(a0, a0 + n):
                             # X(s + 1) is written in id order as we go: the visits read

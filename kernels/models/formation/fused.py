@@ -93,7 +93,7 @@ def advance_kernel(rk4: bool):
                         break
                     if s % every == 0 or s == steps:
                         row = ooff[b] + iprm[b, IP.NOBS]
-                        iprm[b, IP.NOBS] += 1
+                        iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
                         observe(b, a0, n, s, h, h0, row, prm, iprm, chg, inforce, lead,
                                  forms, pos, deg, parent, ang, gmax, gcnt, obs)
                     if s < steps:

@@ -182,7 +182,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
                     gap = first + TWO_PI - ang[k]
                 gmax[root] = ti.max(gmax[root], gap)
                 if gap > np.pi - 1e-9:
-                    gcnt[root] += 1
+                    gcnt[root] = gcnt[root] + 1
         d3 = 1.0
         for k in range(a0, a0 + n):
             if gmax[k] >= 0.0:  # a root with far agents
