@@ -31,7 +31,7 @@ from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
 from ... import runtime
 from ...batch import FusedBatch
-from ...space import rng
+from ...space import rng, trig
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import union_serial
 from ...space.grid import max_cells_across, widen
@@ -66,9 +66,20 @@ def _key(kseed, step):
     return rng._mix(kseed ^ rng._mix(ti.cast(step, ti.u32)))
 
 
+def _tracks(scenario: Scenario) -> bool:
+    """Whether the run tracks Theorem 2's linked intervals (by default up to 10^5 agents)."""
+    track = scenario.model.track_linked_intervals  # type: ignore[union-attr]
+    return scenario.n_agents <= 100_000 if track is None else bool(track)
+
+
 @cache
-def advance_kernel(rule: int, periodic: bool):
-    """The window kernel for one rule and geometry (compile-time specialised)."""
+def advance_kernel(rule: int, periodic: bool, full: bool):
+    """The window kernel for one rule and geometry (compile-time specialised). `full`:
+    some replica asks for the components, Theorem 2's intervals or the heading spread;
+    without them the kernel is half the code (the visit that links the graph, the
+    union-find and the spread are left out), which halves what Taichi re-reads and
+    LLVM re-generates at every process start. The arithmetic of a step is the same in
+    both, so a replica's bits do not depend on `full`."""
     vicsek = rule == RULES["vicsek"]
 
     @ti.func
@@ -144,7 +155,7 @@ def advance_kernel(rule: int, periodic: bool):
                 cy = ti.min(ti.cast(ti.floor((pos[i, 1] - oy) * inv), ti.i32), ny - 1)
                 cc = ti.max(cx, 0) + nx * ti.max(cy, 0)
                 cell[i] = cc
-                cstart[c0 + cc + 1] += 1
+                cstart[c0 + cc + 1] = cstart[c0 + cc + 1] + 1
             cell_sort(a0, n, c0, nx * ny, cell, cstart, cidx, S)
         elif nx == 0:
             in_id_order(a0, n, cidx, S)
@@ -284,18 +295,19 @@ def advance_kernel(rule: int, periodic: bool):
             sy += e[1]
         obs[row, 0] = s
         obs[row, 1] = ti.sqrt(sx * sx + sy * sy) / n
-        spread = 0.0
-        if iprm[b, IP.WANT_SPREAD] == 0:
-            spread = ti.math.nan  # not asked for (recording.observables)
-        elif ti.static(vicsek):
-            spread = circular_spread(a0, n, ps, arc_lo, arc_hi)
-        else:
-            lo = ti.math.inf
-            hi = -ti.math.inf
-            for k in range(a0, a0 + n):
-                lo = ti.min(lo, ps[k, 2])
-                hi = ti.max(hi, ps[k, 2])
-            spread = hi - lo
+        spread = ti.math.nan  # not asked for (recording.observables)
+        if ti.static(full):
+            if iprm[b, IP.WANT_SPREAD] == 0:
+                pass
+            elif ti.static(vicsek):
+                spread = circular_spread(a0, n, ps, arc_lo, arc_hi)
+            else:
+                lo = ti.math.inf
+                hi = -ti.math.inf
+                for k in range(a0, a0 + n):
+                    lo = ti.min(lo, ps[k, 2])
+                    hi = ti.max(hi, ps[k, 2])
+                spread = hi - lo
         obs[row, 2] = spread
         if ti.static(rule == RULES["leader"]):
             err = 0.0
@@ -331,7 +343,7 @@ def advance_kernel(rule: int, periodic: bool):
             if parent_u[i] == i:
                 roots += 1
         if roots == 1:
-            iprm[b, IP.LINKED] += 1
+            iprm[b, IP.LINKED] = iprm[b, IP.LINKED] + 1
             iprm[b, IP.LONGEST] = ti.max(iprm[b, IP.LONGEST], s + 1 - iprm[b, IP.OPEN])
             iprm[b, IP.OPEN] = s + 1
             for i in range(a0, a0 + n):
@@ -357,8 +369,9 @@ def advance_kernel(rule: int, periodic: bool):
         if prm[b, P.ETA] > 0.0:
             noise = prm[b, P.ETA] * (rng.uniform(_key(kseed[b], s), i - a0) - 0.5)
             if ti.static(vicsek):
-                cn = ti.cos(noise)  # rotate e_new by the noise angle
-                sn = ti.sin(noise)
+                cs = trig.cos_sin(noise)  # rotate e_new by the noise angle
+                cn = cs[0]
+                sn = cs[1]
                 e_new = ti.math.vec2(cn * e_new[0] - sn * e_new[1],
                                      sn * e_new[0] + cn * e_new[1])
             else:
@@ -431,9 +444,15 @@ def advance_kernel(rule: int, periodic: bool):
                             cend = a0 + cstart[c0 + cx + nx * cy + 1]
                         i = cidx[k]
                         acc = ti.math.vec3(0.0)
-                        if graph or tracking:  # the components and Theorem 2's forest
-                            acc = sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, True, graph,
-                                       tracking, ps, cstart, cidx, parent, parent_u)
+                        if ti.static(full):
+                            if graph or tracking:  # the components and Theorem 2's forest
+                                acc = sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, True,
+                                           graph, tracking, ps, cstart, cidx, parent,
+                                           parent_u)
+                            else:
+                                acc = sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, False,
+                                           graph, tracking, ps, cstart, cidx, parent,
+                                           parent_u)
                         else:
                             acc = sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, False, graph,
                                        tracking, ps, cstart, cidx, parent, parent_u)
@@ -443,12 +462,13 @@ def advance_kernel(rule: int, periodic: bool):
                                           ew, theta)
                     if observing:
                         row = ooff[b] + iprm[b, IP.NOBS]
-                        iprm[b, IP.NOBS] += 1
+                        iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
                         observe(b, a0, n, s, row, ps, parent, deg, arc_lo, arc_hi, prm, iprm,
                                 obs)
                     if s < steps:
-                        if track:
-                            close_linked(b, a0, n, s, parent_u, iprm)
+                        if ti.static(full):
+                            if track:
+                                close_linked(b, a0, n, s, parent_u, iprm)
                         if bad != 0:
                             iprm[b, IP.BAD] = s
                     s += 1
@@ -468,7 +488,7 @@ class VicsekBatch(FusedBatch):
         p0: VicsekParams = first.model  # type: ignore[assignment]
         self.rule = p0.rule
         self.periodic = isinstance(first.space, PeriodicBox)
-        self.kernel = advance_kernel(RULES[p0.rule], self.periodic)
+        self.kernel = advance_kernel(RULES[p0.rule], self.periodic, self.full(first))
         ns = [s.n_agents for s in scenarios]
         self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
         caps = [2 * n + 16 for n in ns]  # cells per replica (the cell budget) + 1
@@ -490,8 +510,7 @@ class VicsekBatch(FusedBatch):
             r2 = runtime.next_above(r * r) if sc.inclusive else r * r
             prm[b, [P.R2, P.V0DT, P.ETA, P.G, P.L, P.THETA0, P.RADIUS]] = [
                 r2, p.v0 * sc.time.dt, p.eta, p.g or 1.0, L_, p.leader_heading, r]
-            track = p.track_linked_intervals
-            track = sc.n_agents <= 100_000 if track is None else track
+            track = _tracks(sc)
             self.track.append(track)
             chosen = set(sc.recording.observables or OBS)
             iprm[b, [IP.STEPS, IP.EVERY, IP.TRACK, IP.BAD, IP.MOVE_NEW, IP.WANT_COMPONENTS,
@@ -587,7 +606,15 @@ class VicsekBatch(FusedBatch):
         return (step, *CAUSES[iprm[b, IP.CAUSE]])
 
     @staticmethod
-    def batch_key(scenario: Scenario) -> tuple | None:
+    def full(scenario: Scenario) -> bool:
+        """Whether `scenario` needs the kernel with the graph's components, Theorem 2's
+        intervals and the heading spread (`advance_kernel`'s `full`)."""
+        chosen = set(scenario.recording.observables or OBS)
+        return bool(_tracks(scenario) or chosen & {"components", "heading_spread"})
+
+    @classmethod
+    def batch_key(cls, scenario: Scenario) -> tuple | None:
         """Scenarios with the same key share a launch; None: not for this path."""
         p: VicsekParams = scenario.model  # type: ignore[assignment]
-        return ("vicsek", p.rule, isinstance(scenario.space, PeriodicBox))
+        return ("vicsek", p.rule, isinstance(scenario.space, PeriodicBox),
+                cls.full(scenario))

@@ -30,7 +30,7 @@ from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
-from ...space import rng
+from ...space import rng, trig
 from ...space.graph import MetricGraph, count_roots, find, link, reset_parent
 from ...space.grid import Grid, make_visitor, row, within
 from ...space.initial import initial_state
@@ -162,8 +162,9 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
             elif prm[P.ETA] > 0.0:
                 noise = prm[P.ETA] * (rng.uniform(key, ids[i]) - 0.5)
                 if ti.static(rule == RULES["vicsek"]):
-                    cx = ti.cos(noise)  # rotate e_new by the noise angle
-                    sx = ti.sin(noise)
+                    cs = trig.cos_sin(noise)  # rotate e_new by the noise angle
+                    cx = cs[0]
+                    sx = cs[1]
                     ex = e_new[0]
                     ey = e_new[1]
                     e_new = ti.math.vec2(cx * ex - sx * ey, sx * ex + cx * ey)
