@@ -52,7 +52,26 @@ def scenarios(examples: Path) -> list[tuple[str, Scenario]]:
             out.append((path.name, Scenario.model_validate(doc)))
     out += [(f"sweep:{name}[0]", get_sweep_preset(name).expand()[0].scenario)
             for name in sorted(SWEEP_PRESETS)]
-    return out + option_variants(out)
+    return out + option_variants(out) + lean_variants(out)
+
+
+def lean_variants(found: list[tuple[str, Scenario]]) -> list[tuple[str, Scenario]]:
+    """The Vicsek family's fused kernel comes in two builds: with the graph's components,
+    Theorem 2's intervals and the heading spread, and without (a run recording none of
+    them, as most sweeps do). For each rule and geometry in `found`, the build it lacks."""
+    vicsek = [(name, sc) for name, sc in found if sc.model.kind == "vicsek"]
+    key = engine.kernel_for("vicsek").batch.batch_key
+    seen = {key(sc) for _, sc in vicsek}
+    out = []
+    for name, sc in vicsek:
+        doc = sc.model_dump(mode="json")
+        doc["model"]["track_linked_intervals"] = False
+        doc["recording"]["observables"] = ["polarization"]
+        lean = Scenario.model_validate(doc)
+        if key(lean) not in seen:
+            seen.add(key(lean))
+            out.append((f"{name} observables=polarization", lean))
+    return out
 
 
 def option_variants(found: list[tuple[str, Scenario]]) -> list[tuple[str, Scenario]]:
