@@ -33,6 +33,7 @@ class FusedBatch:
 
     args: dict[str, Any]
     STEPS = 0  # iprm slot of each replica's last step
+    dimensions: tuple[int, ...] = (2,)  # the values of space.dimension the kernel runs
 
     def end_at(self, step: int) -> None:
         """Make `step` every replica's last (cancellation): the next window observes it."""

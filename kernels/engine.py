@@ -136,7 +136,7 @@ def _fused_key(scenario: Scenario):
             scenario.precision == "float32"
             and scenario.time.steps >= FUSED_MAX_STEPS_FLOAT32):
         return None
-    if scenario.dimension != 2:  # the fused kernels are 2D: 3D takes the per-step path
+    if scenario.dimension not in cls.dimensions:  # e.g. a 2D-only fused kernel in 3D
         return None
     return cls.batch_key(scenario)
 

@@ -13,6 +13,17 @@ def taichi_cpu():
     return runtime.ensure("cpu")
 
 
+@pytest.fixture(params=["fused", "per_step"])
+def path(request, monkeypatch):
+    """Run the test on both engine paths: the fused small-N one (where the engine takes it)
+    and the per-step one (forced by lowering the fused path's size limit)."""
+    from flocklab import kernels
+
+    if request.param == "per_step":
+        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
+    return request.param
+
+
 @pytest.fixture
 def fixed_windows(monkeypatch):
     """Make the fused driver's windows a fixed number of agent-steps (instead of ~0.1 s

@@ -18,6 +18,9 @@ from flocklab.kernels.models.flocking.fused import FlockingBatch
 from flocklab.kernels.runtime import DevicePolicy
 from flocklab.schemas import Scenario
 
+# Taichi on the CPU for every test (the two-path `path` fixture does not start it).
+pytestmark = pytest.mark.usefixtures("taichi_cpu")
+
 TOL = 1e-10
 
 
@@ -201,16 +204,6 @@ def m3_scenario(n=12, steps=200, dt=0.01, R=2.0, seed=7, **model) -> Scenario:
         "initial": lattice(n, 1.05, seed, speed=0.4, origin=(0.0, 0.0)),
         "time": {"steps": steps, "dt": dt}, "seed": seed,
     })
-
-
-@pytest.fixture(params=["fused", "per_step"])
-def path(request, monkeypatch, taichi_cpu):
-    """Run the test on both engine paths: the fused small-N one (kernels/models/flocking/fused.py,
-    where the engine takes it) and the per-step one (forced by lowering the fused path's
-    size limit). Pass it on to `make_kernel`."""
-    if request.param == "per_step":
-        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
-    return request.param
 
 
 class FusedKernel:

@@ -42,13 +42,6 @@ def back_to_float64():
     runtime.ensure("cpu")
 
 
-@pytest.fixture(params=["fused", "per_step"])
-def path(request, monkeypatch):
-    if request.param == "per_step":
-        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
-    return request.param
-
-
 def scale(a: np.ndarray) -> float:
     return 1.0 + float(np.abs(a).max())
 

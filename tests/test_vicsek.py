@@ -10,6 +10,9 @@ from flocklab.kernels.space import rng
 from flocklab.schemas import Scenario
 from tests.reference import vicsek_step
 
+# Taichi on the CPU for every test (the two-path `path` fixture does not start it).
+pytestmark = pytest.mark.usefixtures("taichi_cpu")
+
 
 class Frames:
     """A FrameSink keeping every frame in memory (small runs only)."""
@@ -39,15 +42,6 @@ def scenario(rule="vicsek", N=60, L=6.0, r=1.0, eta=0.0, steps=20, v0=0.1, seed=
         "recording": {"every": every, "arrays": ["position", "heading"]},
         "seed": seed,
     })
-
-
-@pytest.fixture(params=["fused", "per_step"])
-def path(request, monkeypatch, taichi_cpu):
-    """Run the test on both engine paths: the fused small-N one (default at these sizes)
-    and the per-step one (forced by lowering the fused path's size limit)."""
-    if request.param == "per_step":
-        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
-    return request.param
 
 
 def run_frames(sc):

@@ -1,5 +1,6 @@
-"""M1 in 3D (rule vicsek): the step against the brute-force reference, and the properties
-of the rule: alignment in one step, isotropy at eta = 2 pi, per-step routing, outputs."""
+"""M1 in 3D (rule vicsek): the step against the brute-force reference on both engine paths
+(fused small-N and per-step), and the properties of the rule: alignment in one step,
+isotropy at eta = 2 pi, a batch's bits, outputs."""
 
 import math
 
@@ -49,10 +50,10 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()))
-def test_matches_brute_force_step_by_step(taichi_cpu, case):
+def test_matches_brute_force_step_by_step(taichi_cpu, path, case):
     sc = scenario(**case)
     result, sink = run_frames(sc)
-    assert result.extra["engine_path"] == "per_step"  # the fused path stays 2D
+    assert result.extra["engine_path"] == path
     p = sc.model
     L = sc.space.L if sc.space.kind == "periodic" else None
     assert sink.pos[0].shape == (sc.n_agents, 3) and sink.theta[0].shape == (sc.n_agents, 3)
@@ -109,14 +110,32 @@ def test_full_noise_polarization_scales_as_on_the_sphere(taichi_cpu):
     assert abs(pol.mean() * math.sqrt(n) - math.sqrt(8 / (3 * math.pi))) < 0.1
 
 
-def test_run_batch_routes_3d_to_the_per_step_path(taichi_cpu):
-    scs = [scenario(seed=s, eta=0.5, steps=5, every=0) for s in (1, 2, 3)]
+@pytest.mark.parametrize("L", [4.0, None], ids=["periodic", "plane"])
+def test_a_batch_gives_each_3d_replica_its_bits_alone(taichi_cpu, L):
+    scs = [scenario(seed=s, eta=0.5 * s, N=40 + 30 * s, L=L, steps=12, every=0)
+           for s in (1, 2, 3)]
     alone = [kernels.run(sc) for sc in scs]
     together = kernels.engine.run_batch(scs)
     assert len(together) == 3
     for a, b in zip(alone, together, strict=True):
-        assert b.extra["engine_path"] == "per_step"
-        assert a.final == b.final
+        assert a.extra["engine_path"] == b.extra["engine_path"] == "fused"
+        for k in a.observables:
+            assert np.array_equal(a.observables[k], b.observables[k]), k
+
+
+@pytest.mark.parametrize("L", [6.0, None], ids=["periodic", "plane"])
+def test_fused_and_per_step_agree_in_3d(taichi_cpu, monkeypatch, L):
+    # The two paths sum the neighbours in different orders: equal to rounding, with the
+    # graph observables exactly equal (the cell budget's cube root: N = 400, 5 cells across).
+    sc = scenario(N=400, L=L, eta=1.1, steps=15, every=0)
+    fused = kernels.run(sc)
+    monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
+    per_step = kernels.run(sc)
+    assert (fused.extra["engine_path"], per_step.extra["engine_path"]) == ("fused", "per_step")
+    for k in ("components", "degree_mean", "degree_min", "degree_max", "isolated"):
+        assert np.array_equal(fused.observables[k], per_step.observables[k]), k
+    for k in ("polarization", "heading_spread"):
+        assert np.allclose(fused.observables[k], per_step.observables[k], atol=1e-9), k
 
 
 def test_linked_intervals_and_graph_in_3d(taichi_cpu):

@@ -14,10 +14,12 @@ Per replica and step s (state X(s) in agent-id order):
      in id order (so every neighbour sum has one fixed order); the periodic box uses
      floor(L / r) cells across, the plane a grid over the bounding box; fewer than three
      cells across, or N <= ALL_PAIRS_N, visits all pairs instead;
-  2. the closed-neighbourhood sums of the rule over the 3x3 block (minimum image), the
-     new heading with its noise xi = eta (u - 1/2), u = hash(seed, step, id), and the move;
-     on an observation step the same visit gives the degrees and the components;
+  2. the closed-neighbourhood sums of the rule over the 3x3 (3D: 3x3x3) block (minimum
+     image), the new heading with its noise (2D: xi = eta (u - 1/2), u = hash(seed, step,
+     id); 3D: the turn into the spherical cap of `kernel.cap_turn`, streams 0 and 1), and
+     the move; on an observation step the same visit gives the degrees and the components;
   3. commit X(s+1). A non-finite value stops the replica and records the step.
+The dimension is a compile-time parameter: 2D compiles to the code it was before 3D.
 """
 
 
@@ -43,7 +45,7 @@ ALL_PAIRS_N = 48  # at or below this N every pair is tested (fewer operations th
 TWO_PI = 2 * np.pi
 
 # Per-replica parameter slots: prm (f64) and iprm (i32).
-P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0", "RADIUS")
+P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0", "RADIUS", "CAP")
 IP = Slots("STEPS", "EVERY", "TRACK", "NOBS", "BAD", "LINKED", "LONGEST", "OPEN", "CAUSE",
            "MOVE_NEW", "WANT_COMPONENTS", "WANT_SPREAD")
 # Why a replica stopped (iprm[IP.CAUSE]), as the per-step path words it.
@@ -62,8 +64,27 @@ N_OBS = len(OBS)
 
 @ti.func
 def _key(kseed, step):
-    """rng.step_key(seed, 0, step), with the seed's part precomputed on the host."""
+    """rng.step_key(seed, stream, step), with the (seed, stream) part precomputed on the
+    host."""
     return rng._mix(kseed ^ rng._mix(ti.cast(step, ti.u32)))
+
+
+@ti.func
+def cap_turn(m, u1, u2, cap):
+    """The unit 3-vector m turned to a direction uniform in the spherical cap around it of
+    height cap = 1 - cos(eta/2): 1 - cos t = u1 cap, azimuth 2 pi u2 about m (both paths'
+    3D noise)."""
+    h = u1 * cap  # 1 - cos t, exact near t = 0 (no 1 - cos^2 cancellation)
+    ct = 1.0 - h
+    st = ti.sqrt(ti.max(0.0, h * (2.0 - h)))
+    # An orthonormal frame (m, b1, b2): b1 from the axis least aligned with m.
+    axis = ti.math.vec3(1.0, 0.0, 0.0)
+    if ti.abs(m[0]) > 0.5:
+        axis = ti.math.vec3(0.0, 1.0, 0.0)
+    b1 = ti.math.normalize(axis - axis.dot(m) * m)
+    b2 = m.cross(b1)
+    phi = 2.0 * ti.math.pi * u2
+    return ct * m + st * (ti.cos(phi) * b1 + ti.sin(phi) * b2)
 
 
 def _tracks(scenario: Scenario) -> bool:
@@ -73,25 +94,27 @@ def _tracks(scenario: Scenario) -> bool:
 
 
 @cache
-def advance_kernel(rule: int, periodic: bool, full: bool):
+def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
     """The window kernel for one rule and geometry (compile-time specialised). `full`:
     some replica asks for the components, Theorem 2's intervals or the heading spread;
     without them the kernel is half the code (the visit that links the graph, the
     union-find and the spread are left out), which halves what Taichi re-reads and
     LLVM re-generates at every process start. The arithmetic of a step is the same in
-    both, so a replica's bits do not depend on `full`."""
+    both, so a replica's bits do not depend on `full`. `dim` 3: the vicsek rule only."""
     vicsek = rule == RULES["vicsek"]
+    vec = ti.types.vector(dim, float)
 
     @ti.func
     def load(k, i, pos: ti.template(), ew: ti.template(), theta: ti.template(),
              ps: ti.template(), parent: ti.template()):
-        """Agent i's state X(s) into slot k of ps: (x, y, e_x, e_y), or (x, y, theta, 0)
-        for the JLM rules; and i as its own root of the components."""
-        ps[k, 0] = pos[i, 0]
-        ps[k, 1] = pos[i, 1]
+        """Agent i's state X(s) into slot k of ps: (x, y, e_x, e_y) (3D: (x, y, z, e_x, e_y,
+        e_z)), or (x, y, theta, 0) for the JLM rules; and i as its own root of the
+        components."""
+        for c in ti.static(range(dim)):
+            ps[k, c] = pos[i, c]
         if ti.static(vicsek):
-            ps[k, 2] = ew[i, 0]
-            ps[k, 3] = ew[i, 1]
+            for c in ti.static(range(dim)):
+                ps[k, dim + c] = ew[i, c]
         else:
             ps[k, 2] = theta[i]
             ps[k, 3] = 0.0
@@ -105,61 +128,88 @@ def advance_kernel(rule: int, periodic: bool, full: bool):
     cell_sort, in_id_order = make_cell_sort(place)
 
     @ti.func
+    def cells_for(ext, w):
+        """Cells of side w over a bounding box of extent ext (a float: no overflow)."""
+        cells = (ext[0] / w + 1.0) * (ext[1] / w + 1.0)
+        if ti.static(dim == 3):
+            cells *= ext[2] / w + 1.0
+        return cells
+
+    @ti.func
     def build_cells(a0, n, c0, cap, Lb, r, pos: ti.template(), ew: ti.template(),
                     theta: ti.template(), ps: ti.template(), cell: ti.template(),
                     cstart: ti.template(), cidx: ti.template(), parent: ti.template()):
         """Cell list of the replica's agents: cidx[a0 + k] is the agent in slot k, slots in
         cell order and, within a cell, in id order (a stable counting sort), and cell c
         holds slots cstart[c0 + c] .. cstart[c0 + c + 1]; X(s) is copied into ps in slot
-        order on the way (the visit reads only ps). Returns the cells across (nx, ny);
-        nx = 0: no grid, visit all pairs."""
+        order on the way (the visit reads only ps). Returns the cells across (nx, ny, nz;
+        nz = 1 in 2D); nx = 0: no grid, visit all pairs."""
         nx = 0
         ny = 0
+        nz = 1
         w = r * ti.static(widen())
-        ox = 0.0
-        oy = 0.0
+        o = vec(0.0)
         if ti.static(periodic):
             if n > ALL_PAIRS_N:
-                nc = ti.min(ti.cast(ti.floor(Lb / w), ti.i32), ti.cast(ti.sqrt(cap), ti.i32))
+                per_axis = ti.cast(ti.sqrt(cap), ti.i32)
+                if ti.static(dim == 3):  # the integer cube root of the cell budget
+                    per_axis = ti.cast(ti.pow(ti.cast(cap, float), 1.0 / 3.0), ti.i32)
+                    while (per_axis + 1) ** 3 <= cap:
+                        per_axis += 1
+                    while per_axis**3 > cap:
+                        per_axis -= 1
+                nc = ti.min(ti.cast(ti.floor(Lb / w), ti.i32), per_axis)
                 if nc >= 3:  # fewer: the 3x3 block would meet a cell twice
                     nx = nc
                     ny = nc
+                    if ti.static(dim == 3):
+                        nz = nc
                     w = Lb / nc
         else:
-            lo = ti.math.vec2(ti.math.inf)
-            hi = ti.math.vec2(-ti.math.inf)
+            lo = vec(ti.math.inf)
+            hi = vec(-ti.math.inf)
             for i in range(a0, a0 + n):
-                p = ti.math.vec2(pos[i, 0], pos[i, 1])
+                p = vec(0.0)
+                for c in ti.static(range(dim)):
+                    p[c] = pos[i, c]
                 lo = ti.min(lo, p)
                 hi = ti.max(hi, p)
             ext = hi - lo
-            if not (ti.max(ext[0], ext[1]) < ti.static(max_cells_across()) * w):  # NaN included
+            widest = ti.max(ext[0], ext[1])
+            if ti.static(dim == 3):
+                widest = ti.max(widest, ext[2])
+            if not (widest < ti.static(max_cells_across(dim)) * w):  # NaN included
                 nx = -1  # runaway (checked at every N): the caller stops the replica
             elif n > ALL_PAIRS_N:
                 # Widen the cells until the grid fits the replica's cell budget (a swarm
                 # spread over 10^6 radii then shares a few large cells: slower, never wrong).
-                while (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
+                while cells_for(ext, w) > cap:
                     w *= 2.0
                 nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
                 ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
-                ox = lo[0]
-                oy = lo[1]
-                if nx < 3 and ny < 3:
+                if ti.static(dim == 3):
+                    nz = ti.cast(ti.floor(ext[2] / w), ti.i32) + 1
+                for c in ti.static(range(dim)):
+                    o[c] = lo[c]
+                if nx < 3 and ny < 3 and nz < 3:
                     nx = 0
         S = ti.static((pos, ew, theta, ps, parent))
         if nx > 0:
-            clear_cells(c0, nx * ny, cstart)
+            clear_cells(c0, nx * ny * nz, cstart)
             inv = 1.0 / w
             for i in range(a0, a0 + n):
-                cx = ti.min(ti.cast(ti.floor((pos[i, 0] - ox) * inv), ti.i32), nx - 1)
-                cy = ti.min(ti.cast(ti.floor((pos[i, 1] - oy) * inv), ti.i32), ny - 1)
+                cx = ti.min(ti.cast(ti.floor((pos[i, 0] - o[0]) * inv), ti.i32), nx - 1)
+                cy = ti.min(ti.cast(ti.floor((pos[i, 1] - o[1]) * inv), ti.i32), ny - 1)
                 cc = ti.max(cx, 0) + nx * ti.max(cy, 0)
+                if ti.static(dim == 3):
+                    cz = ti.min(ti.cast(ti.floor((pos[i, 2] - o[2]) * inv), ti.i32), nz - 1)
+                    cc += nx * ny * ti.max(cz, 0)
                 cell[i] = cc
                 cstart[c0 + cc + 1] = cstart[c0 + cc + 1] + 1
-            cell_sort(a0, n, c0, nx * ny, cell, cstart, cidx, S)
+            cell_sort(a0, n, c0, nx * ny * nz, cell, cstart, cidx, S)
         elif nx == 0:
             in_id_order(a0, n, cidx, S)
-        return ti.math.ivec2(nx, ny)
+        return ti.math.ivec3(nx, ny, nz)
 
     @ti.func
     def add(k, m, d, a, r2, links: ti.template(), ps: ti.template(), cidx: ti.template(),
@@ -177,32 +227,41 @@ def advance_kernel(rule: int, periodic: bool, full: bool):
                     union_serial(parent, cidx[k], cidx[m])
                 if track:
                     union_serial(parent_u, cidx[k], cidx[m])
-        return a + w * ti.math.vec3(ps[m, 2], ps[m, 3], 1.0)
+        # (e_m, 1) for the vicsek rule, (theta_m, 0, 1) for the JLM rules (2D).
+        return a + w * ti.Vector([ps[m, dim + c] for c in ti.static(range(dim))] + [1.0])
 
     @ti.func
-    def run(k, lo, hi, sx, sy, a, r2, links: ti.template(), ps: ti.template(),
+    def run(k, lo, hi, sh, a, r2, links: ti.template(), ps: ti.template(),
             cidx: ti.template(), parent: ti.template(), parent_u: ti.template(), graph,
             track):
-        """Slots lo .. hi, whose periodic image beside slot k is r_m + (sx, sy):
-        d = r_m - (r_k - s)."""
-        xs = ti.math.vec2(ps[k, 0] - sx, ps[k, 1] - sy)
+        """Slots lo .. hi, whose periodic image beside slot k is r_m + sh:
+        d = r_m - (r_k - sh)."""
+        xs = vec(0.0)
+        for c in ti.static(range(dim)):
+            xs[c] = ps[k, c] - sh[c]
         for m in range(lo, hi):
-            d = ti.math.vec2(ps[m, 0] - xs[0], ps[m, 1] - xs[1])
+            d = vec(0.0)
+            for c in ti.static(range(dim)):
+                d[c] = ps[m, c] - xs[c]
             a = add(k, m, d, a, r2, links, ps, cidx, parent, parent_u, graph, track)
         return a
 
     @ti.func
-    def sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, links: ti.template(), graph, track,
+    def sums(k, cc, a0, n, c0, nc, Lb, r2, links: ti.template(), graph, track,
              ps: ti.template(), cstart: ti.template(), cidx: ti.template(),
              parent: ti.template(), parent_u: ti.template()):
-        """(sum of the terms, 0, count) over slot k's closed neighbourhood (k in cell
-        (cx, cy)): every slot
-        (minimum image) without a grid, else the 3x3 block of cells around it; periodic
-        images are shifted by +-L per run of slots, never tested per pair."""
-        a = ti.math.vec3(0.0)
+        """(sum of the terms, count) over slot k's closed neighbourhood (k in cell cc of
+        the nc cells across): every slot (minimum image) without a grid, else the 3x3
+        (3x3x3) block of cells around it; periodic images are shifted by +-L per run of
+        slots, never tested per pair."""
+        a = ti.Vector.zero(float, dim + 1)
+        cx, cy, cz = cc[0], cc[1], cc[2]
+        nx, ny, nz = nc[0], nc[1], nc[2]
         if nx == 0:
             for m in range(a0, a0 + n):
-                d = ti.math.vec2(ps[m, 0] - ps[k, 0], ps[m, 1] - ps[k, 1])
+                d = vec(0.0)
+                for c in ti.static(range(dim)):
+                    d[c] = ps[m, c] - ps[k, c]
                 if ti.static(periodic):
                     d -= Lb * ti.round(d / Lb)
                 a = add(k, m, d, a, r2, links, ps, cidx, parent, parent_u, graph, track)
@@ -221,35 +280,72 @@ def advance_kernel(rule: int, periodic: bool, full: bool):
                     wc, sx, wrapped = nx - 1, -Lb, 1
                 elif cx == nx - 1:
                     wc, sx, wrapped = 0, Lb, 1
-            for dy in range(-1, 2):
-                qy = cy + dy
-                sy = 0.0
-                row_ok = 1
-                if ti.static(periodic):
-                    if qy < 0:
-                        qy += ny
-                        sy = -Lb
-                    elif qy >= ny:
-                        qy -= ny
-                        sy = Lb
-                else:
-                    row_ok = ti.cast(qy >= 0 and qy < ny, ti.i32)
-                if row_ok:
-                    row = c0 + nx * qy
-                    a = run(k, a0 + cstart[row + lo_c], a0 + cstart[row + hi_c + 1], 0.0, sy,
-                            a, r2, links, ps, cidx, parent, parent_u, graph, track)
-                    if wrapped:
-                        a = run(k, a0 + cstart[row + wc], a0 + cstart[row + wc + 1], sx, sy,
+            # 2D: one plane (dz = 0); 3D: the planes cz - 1 .. cz + 1, wrapped alike.
+            for dz in range(ti.static(-1 if dim == 3 else 0), ti.static(2 if dim == 3 else 1)):
+                qz = cz + dz
+                sz = 0.0
+                plane_ok = 1
+                if ti.static(dim == 3):
+                    if ti.static(periodic):
+                        if qz < 0:
+                            qz += nz
+                            sz = -Lb
+                        elif qz >= nz:
+                            qz -= nz
+                            sz = Lb
+                    else:
+                        plane_ok = ti.cast(qz >= 0 and qz < nz, ti.i32)
+                for dy in range(-1, 2):
+                    qy = cy + dy
+                    sy = 0.0
+                    row_ok = plane_ok
+                    if ti.static(periodic):
+                        if qy < 0:
+                            qy += ny
+                            sy = -Lb
+                        elif qy >= ny:
+                            qy -= ny
+                            sy = Lb
+                    else:
+                        row_ok = ti.cast(plane_ok != 0 and qy >= 0 and qy < ny, ti.i32)
+                    if row_ok:
+                        row = c0 + nx * qy
+                        sh = vec(0.0)
+                        sh[1] = sy
+                        if ti.static(dim == 3):
+                            row += nx * ny * qz
+                            sh[2] = sz
+                        a = run(k, a0 + cstart[row + lo_c], a0 + cstart[row + hi_c + 1], sh,
                                 a, r2, links, ps, cidx, parent, parent_u, graph, track)
+                        if wrapped:
+                            sh[0] = sx
+                            a = run(k, a0 + cstart[row + wc], a0 + cstart[row + wc + 1], sh,
+                                    a, r2, links, ps, cidx, parent, parent_u, graph, track)
         return a
 
     @ti.func
     def heading_vector(ps: ti.template(), k):
         """e(theta) of slot k: stored (vicsek rule) or from the angle (JLM rules)."""
-        e = ti.math.vec2(ps[k, 2], ps[k, 3])
-        if ti.static(not vicsek):
+        e = vec(0.0)
+        if ti.static(vicsek):
+            for c in ti.static(range(dim)):
+                e[c] = ps[k, dim + c]
+        else:
             e = ti.math.vec2(ti.cos(ps[k, 2]), ti.sin(ps[k, 2]))
         return e
+
+    @ti.func
+    def sphere_spread(a0, n, sm, ps: ti.template()):
+        """3D: twice the largest angle between a heading and the mean heading sm / |sm| (0
+        when all are aligned; 2 pi when the headings cancel), as the per-step path."""
+        res = 2.0 * ti.math.pi
+        nrm = sm.norm()
+        if nrm > 0.0:
+            least = ti.math.inf
+            for k in range(a0, a0 + n):
+                least = ti.min(least, heading_vector(ps, k).dot(sm / nrm))
+            res = 2.0 * ti.acos(ti.min(1.0, ti.max(-1.0, least)))
+        return res
 
     @ti.func
     def circular_spread(a0, n, ps: ti.template(), lo: ti.template(), hi: ti.template()):
@@ -287,18 +383,20 @@ def advance_kernel(rule: int, periodic: bool, full: bool):
                 arc_hi: ti.template(), prm: ti.template(), iprm: ti.template(),
                 obs: ti.template()):
         """Observables of X(s) (ps: slot order) into obs[row]: the columns of OBS."""
-        sx = 0.0
-        sy = 0.0
+        sm = vec(0.0)
         for k in range(a0, a0 + n):
-            e = heading_vector(ps, k)
-            sx += e[0]
-            sy += e[1]
+            sm += heading_vector(ps, k)
+        nrm2 = sm[0] * sm[0] + sm[1] * sm[1]
+        if ti.static(dim == 3):
+            nrm2 += sm[2] * sm[2]
         obs[row, 0] = s
-        obs[row, 1] = ti.sqrt(sx * sx + sy * sy) / n
+        obs[row, 1] = ti.sqrt(nrm2) / n
         spread = ti.math.nan  # not asked for (recording.observables)
         if ti.static(full):
             if iprm[b, IP.WANT_SPREAD] == 0:
                 pass
+            elif ti.static(dim == 3):
+                spread = sphere_spread(a0, n, sm, ps)
             elif ti.static(vicsek):
                 spread = circular_spread(a0, n, ps, arc_lo, arc_hi)
             else:
@@ -357,8 +455,13 @@ def advance_kernel(rule: int, periodic: bool, full: bool):
         result is not finite."""
         th = ps[k, 2]
         new = th
-        e_new = ti.math.vec2(1.0, 0.0)
-        if ti.static(vicsek):
+        e_new = ti.Vector.unit(dim, 0, float)
+        if ti.static(dim == 3):
+            nrm = ti.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2])
+            if nrm > 0.0:  # as the per-step path: the x axis for a zero sum
+                for c in ti.static(range(3)):
+                    e_new[c] = acc[c] / nrm
+        elif ti.static(vicsek):
             nrm = ti.sqrt(acc[0] * acc[0] + acc[1] * acc[1])
             if nrm > 0.0:  # arg(0) = 0, as atan2(0, 0)
                 e_new = ti.math.vec2(acc[0], acc[1]) * (1.0 / nrm)
@@ -366,8 +469,12 @@ def advance_kernel(rule: int, periodic: bool, full: bool):
             new = th - (acc[2] * th - acc[0]) / prm[b, P.G]  # eq. 18
         else:
             new = acc[0] / acc[2]  # eq. 1-2 (and 22 for the leader)
-        if prm[b, P.ETA] > 0.0:
-            noise = prm[b, P.ETA] * (rng.uniform(_key(kseed[b], s), i - a0) - 0.5)
+        if ti.static(dim == 3):
+            if prm[b, P.ETA] > 0.0:
+                e_new = cap_turn(e_new, rng.uniform(_key(kseed[b, 0], s), i - a0),
+                                 rng.uniform(_key(kseed[b, 1], s), i - a0), prm[b, P.CAP])
+        elif prm[b, P.ETA] > 0.0:
+            noise = prm[b, P.ETA] * (rng.uniform(_key(kseed[b, 0], s), i - a0) - 0.5)
             if ti.static(vicsek):
                 cs = trig.cos_sin(noise)  # rotate e_new by the noise angle
                 cn = cs[0]
@@ -381,22 +488,28 @@ def advance_kernel(rule: int, periodic: bool, full: bool):
                 new = prm[b, P.THETA0]
         if ti.static(not vicsek):
             e_new = ti.math.vec2(ti.cos(new), ti.sin(new))
-        e = ti.math.vec2(ew[i, 0], ew[i, 1])  # e(theta_i(s))
+        e = vec(0.0)  # e(theta_i(s))
+        xk = vec(0.0)
+        for c in ti.static(range(dim)):
+            e[c] = ew[i, c]
+            xk[c] = ps[k, c]
         if iprm[b, IP.MOVE_NEW]:
             e = e_new
-        x = ti.math.vec2(ps[k, 0], ps[k, 1]) + prm[b, P.V0DT] * e
+        x = xk + prm[b, P.V0DT] * e
         if ti.static(periodic):
-            for c in ti.static(range(2)):
+            for c in ti.static(range(dim)):
                 if x[c] < 0.0 or x[c] >= Lb:  # wrapped only when it left the box
                     x[c] -= Lb * ti.floor(x[c] / Lb)
                     if x[c] >= Lb:  # x - L floor(x / L) can round up to L itself
                         x[c] -= Lb
-        pos[i, 0] = x[0]
-        pos[i, 1] = x[1]
-        ew[i, 0] = e_new[0]
-        ew[i, 1] = e_new[1]
-        theta[i] = new
+        for c in ti.static(range(dim)):
+            pos[i, c] = x[c]
+            ew[i, c] = e_new[c]
+        if ti.static(not vicsek):
+            theta[i] = new
         v = new + x[0] + x[1] + e_new[0]  # NaN if any term is NaN or infinite
+        if ti.static(dim == 3):
+            v += x[2] + e_new[1] + e_new[2]
         return ti.cast(ti.math.isnan(v) or ti.math.isinf(v), ti.i32)
 
     @ti.kernel
@@ -420,43 +533,46 @@ def advance_kernel(rule: int, periodic: bool, full: bool):
                 while s < s1 and s <= steps and iprm[b, IP.BAD] < 0:
                     observing = s % every == 0 or s == steps
                     graph = observing and iprm[b, IP.WANT_COMPONENTS] != 0
-                    nxy = build_cells(a0, n, c0, cap, Lb, prm[b, P.RADIUS], pos, ew, theta,
-                                      ps, cell, cstart, cidx, parent)
-                    if nxy[0] < 0:
+                    nc = build_cells(a0, n, c0, cap, Lb, prm[b, P.RADIUS], pos, ew, theta,
+                                     ps, cell, cstart, cidx, parent)
+                    if nc[0] < 0:
                         iprm[b, IP.BAD] = s
                         iprm[b, IP.CAUSE] = 1
                         break
-                    nx = nxy[0]
-                    ny = nxy[1]
+                    nx = nc[0]
+                    ny = nc[1]
                     tracking = track and s < steps
                     bad = 0
-                    cx = 0  # slot k's cell, followed along the slots (they are in cell
-                    cy = 0  # order): no division per agent
+                    # Slot k's cell, followed along the slots (they are in cell order): no
+                    # division per agent.
+                    cc = ti.math.ivec3(0)
                     cend = a0 + cstart[c0 + 1] if nx > 0 else a0 + n
                     for k in range(a0, a0 + n):
                         # X(s + 1) is written over X(s) in id order as we go: the visit
                         # reads only the slot-order copy, so the update stays synchronous.
                         while k >= cend:
-                            cx += 1
-                            if cx == nx:
-                                cx = 0
-                                cy += 1
-                            cend = a0 + cstart[c0 + cx + nx * cy + 1]
+                            cc[0] += 1
+                            if cc[0] == nx:
+                                cc[0] = 0
+                                cc[1] += 1
+                                if ti.static(dim == 3):
+                                    if cc[1] == ny:
+                                        cc[1] = 0
+                                        cc[2] += 1
+                            cend = a0 + cstart[c0 + cc[0] + nx * (cc[1] + ny * cc[2]) + 1]
                         i = cidx[k]
-                        acc = ti.math.vec3(0.0)
+                        acc = ti.Vector.zero(float, dim + 1)
                         if ti.static(full):
                             if graph or tracking:  # the components and Theorem 2's forest
-                                acc = sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, True,
-                                           graph, tracking, ps, cstart, cidx, parent,
-                                           parent_u)
+                                acc = sums(k, cc, a0, n, c0, nc, Lb, r2, True, graph,
+                                           tracking, ps, cstart, cidx, parent, parent_u)
                             else:
-                                acc = sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, False,
-                                           graph, tracking, ps, cstart, cidx, parent,
-                                           parent_u)
+                                acc = sums(k, cc, a0, n, c0, nc, Lb, r2, False, graph,
+                                           tracking, ps, cstart, cidx, parent, parent_u)
                         else:
-                            acc = sums(k, cx, cy, a0, n, c0, nx, ny, Lb, r2, False, graph,
+                            acc = sums(k, cc, a0, n, c0, nc, Lb, r2, False, graph,
                                        tracking, ps, cstart, cidx, parent, parent_u)
-                        deg[k] = ti.cast(acc[2], ti.i32) - 1  # the closed set holds i
+                        deg[k] = ti.cast(acc[dim], ti.i32) - 1  # the closed set holds i
                         if s < steps:
                             bad |= update(b, i, k, s, a0, acc, Lb, prm, iprm, kseed, ps, pos,
                                           ew, theta)
@@ -477,8 +593,10 @@ def advance_kernel(rule: int, periodic: bool, full: bool):
 
 
 class VicsekBatch(FusedBatch):
-    """The state of a batch of M1 replicas (any N, L, eta, steps each; one rule and
-    geometry), advanced window by window by `advance_kernel`."""
+    """The state of a batch of M1 replicas (any N, L, eta, steps each; one rule, geometry
+    and dimension), advanced window by window by `advance_kernel`."""
+
+    dimensions = (2, 3)
 
     def __init__(self, scenarios: list[Scenario]):
         from ...space.initial import initial_state
@@ -488,7 +606,8 @@ class VicsekBatch(FusedBatch):
         p0: VicsekParams = first.model  # type: ignore[assignment]
         self.rule = p0.rule
         self.periodic = isinstance(first.space, PeriodicBox)
-        self.kernel = advance_kernel(RULES[p0.rule], self.periodic, self.full(first))
+        self.dim = dim = first.dimension
+        self.kernel = advance_kernel(RULES[p0.rule], self.periodic, self.full(first), dim)
         ns = [s.n_agents for s in scenarios]
         self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
         caps = [2 * n + 16 for n in ns]  # cells per replica (the cell budget) + 1
@@ -499,8 +618,9 @@ class VicsekBatch(FusedBatch):
         B = len(scenarios)
         prm = np.zeros((B, P.size))
         iprm = np.zeros((B, IP.size), dtype=np.int32)
-        kseed = np.zeros(B, dtype=np.uint32)
-        pos = np.zeros((total, 2))
+        kseed = np.zeros((B, 2), dtype=np.uint32)  # noise streams 0 and 1 (3D: two draws)
+        pos = np.zeros((total, dim))
+        ew = np.zeros((total, dim))
         theta = np.zeros(total)
         self.track = []
         for b, sc in enumerate(scenarios):
@@ -508,8 +628,9 @@ class VicsekBatch(FusedBatch):
             r = sc.neighbours.radius
             L_ = sc.space.L if self.periodic else 0.0
             r2 = runtime.next_above(r * r) if sc.inclusive else r * r
-            prm[b, [P.R2, P.V0DT, P.ETA, P.G, P.L, P.THETA0, P.RADIUS]] = [
-                r2, p.v0 * sc.time.dt, p.eta, p.g or 1.0, L_, p.leader_heading, r]
+            prm[b, [P.R2, P.V0DT, P.ETA, P.G, P.L, P.THETA0, P.RADIUS, P.CAP]] = [
+                r2, p.v0 * sc.time.dt, p.eta, p.g or 1.0, L_, p.leader_heading, r,
+                1.0 - np.cos(p.eta / 2)]
             track = _tracks(sc)
             self.track.append(track)
             chosen = set(sc.recording.observables or OBS)
@@ -518,7 +639,7 @@ class VicsekBatch(FusedBatch):
                 sc.time.steps, sc.recording.observables_every, int(track), -1,
                 int(p.position_update == "new_heading"), int("components" in chosen),
                 int("heading_spread" in chosen)]
-            kseed[b] = rng.seed_key(sc.seed, 0)
+            kseed[b] = [rng.seed_key(sc.seed, 0), rng.seed_key(sc.seed, 1)]
             init = initial_state(sc)
             th = init.headings
             if p.rule == "leader":
@@ -526,7 +647,8 @@ class VicsekBatch(FusedBatch):
             a0, a1 = self.aoff[b], self.aoff[b + 1]
             pos[a0:a1] = init.positions
             theta[a0:a1] = th
-        ew = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+            ew[a0:a1] = init.directions if dim == 3 else np.stack([np.cos(th), np.sin(th)],
+                                                                   axis=1)
 
         def arr(a: np.ndarray, dtype=float) -> ti.Ndarray:
             a = runtime.as_real(a) if dtype is float else a
@@ -542,7 +664,7 @@ class VicsekBatch(FusedBatch):
         self.args = dict(
             aoff=arr(self.aoff, i32), coff=arr(self.coff, i32), ooff=arr(self.ooff, i32),
             prm=arr(prm), iprm=arr(iprm, i32), kseed=arr(kseed, ti.u32),
-            pos=arr(pos), ew=arr(ew), theta=arr(theta), ps=scratch((total, 4)),
+            pos=arr(pos), ew=arr(ew), theta=arr(theta), ps=scratch((total, 2 * dim)),
             cell=scratch(total, i32), cstart=scratch(int(self.coff[-1]), i32),
             cidx=scratch(total, i32), parent=scratch(total, i32),
             parent_u=arr(np.arange(total, dtype=np.int32), i32), deg=scratch(total, i32),
@@ -577,6 +699,14 @@ class VicsekBatch(FusedBatch):
         a0, a1 = self.aoff[b], self.aoff[b + 1]
         out = {}
         e = self.host("ew")[a0:a1]
+        if self.dim == 3:  # headings are the unit vectors (N, 3), as on the per-step path
+            if "position" in arrays:
+                out["position"] = self.host("pos")[a0:a1]
+            if "heading" in arrays:
+                out["heading"] = e
+            if "velocity" in arrays:
+                out["velocity"] = self.scenarios[b].model.v0 * e
+            return out
         th = (np.arctan2(e[:, 1], e[:, 0]) if self.rule == "vicsek"
               else self.host("theta")[a0:a1])
         if "position" in arrays:
@@ -617,4 +747,4 @@ class VicsekBatch(FusedBatch):
         """Scenarios with the same key share a launch; None: not for this path."""
         p: VicsekParams = scenario.model  # type: ignore[assignment]
         return ("vicsek", p.rule, isinstance(scenario.space, PeriodicBox),
-                cls.full(scenario))
+                cls.full(scenario), scenario.dimension)
