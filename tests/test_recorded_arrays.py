@@ -4,7 +4,10 @@ statistics; written to H5MD as (F, N) datasets; refused where a model has none."
 
 from __future__ import annotations
 
+import json
 import re
+import subprocess
+import sys
 
 import h5py
 import numpy as np
@@ -251,3 +254,31 @@ def test_missing_derived_arrays_are_refused(spec, message):
     with pytest.raises(ValidationError, match=re.escape("recording.arrays: " + message)) as info:
         Scenario.model_validate(base)
     assert [e.loc for e in field_errors(info.value)] == ["recording.arrays"]
+
+
+def test_the_command_records_degree_at_a_wide_radius(tmp_path):
+    """`flocklab run` end to end: a periodic Vicsek run with r = 0.6 L (beyond L/2) writes
+    the degrees into trajectory.h5; `flocklab validate` names a refused array and exits 2."""
+    doc = vicsek(N=120, L=4.0, r=2.4, steps=10).model_dump(mode="json")
+    doc["recording"] = {"every": 5, "arrays": ["position", "degree"], "observables_every": 5}
+    spec = tmp_path / "s.json"
+    spec.write_text(json.dumps(doc))
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "flocklab", "run", str(spec), "--out",
+                           str(out)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    with h5py.File(out / "trajectory.h5") as f:
+        deg = f["particles/swarm/degree/value"][:]
+        pos = f["particles/swarm/position/value"][:]
+        mean = f["observables/degree_mean/value"][:]
+    assert deg.shape == (3, 120) and deg.dtype == np.int32
+    for k in range(3):
+        np.testing.assert_array_equal(deg[k], degrees(pos[k], 2.4, 4.0, True))
+    assert mean == pytest.approx(deg.mean(axis=1), rel=1e-13)
+    doc["recording"]["arrays"] = ["radius"]
+    spec.write_text(json.dumps(doc))
+    bad = subprocess.run([sys.executable, "-m", "flocklab", "validate", str(spec)],
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2
+    assert "recording.arrays" in bad.stderr + bad.stdout
+    assert "cannot record radius" in bad.stderr + bad.stdout
