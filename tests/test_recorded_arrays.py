@@ -69,8 +69,9 @@ def assert_stats(result, sink, prefix: str, name: str) -> None:
         row = steps.index(step)
         got = {s: result.observables[f"{prefix}_{s}"][row] for s in ("mean", "min", "max")}
         assert (got["min"], got["max"]) == (f[name].min(), f[name].max()), step
-        # The observable sums in storage order, the frame is in id order.
-        assert got["mean"] == pytest.approx(f[name].mean(), rel=1e-13, abs=0), step
+        # The observable sums in storage order and float64, the frame is in id order.
+        want = f[name].astype(np.float64).mean()
+        assert got["mean"] == pytest.approx(want, rel=1e-13, abs=0), step
 
 
 def lattice_points(dim: int, side: int) -> list[list[float]]:
@@ -282,3 +283,18 @@ def test_the_command_records_degree_at_a_wide_radius(tmp_path):
     assert bad.returncode == 2
     assert "recording.arrays" in bad.stderr + bad.stdout
     assert "cannot record radius" in bad.stderr + bad.stdout
+
+
+def test_float32_runs_record_their_own_counts(taichi_cpu):
+    """precision float32: the degree is the float32 engine's count (the observables'), and
+    the radius comes in the engine's float type."""
+    for sc, prefix in ((vicsek(N=80, steps=6), "degree"),
+                       (m3_scenario(n=14, steps=30, neighbour_search="grid"), "valency")):
+        doc = recording(sc, ["position", *sc.model.derived_arrays], 3).model_dump(mode="json")
+        sc32 = Scenario.model_validate({**doc, "precision": "float32"})
+        result, sink = run(sc32)
+        assert sink.frames[0]["position"].dtype == np.float32
+        assert_stats(result, sink, prefix, "degree")
+        if "radius" in sc.model.derived_arrays:
+            assert sink.frames[-1]["radius"].dtype == np.float32
+            assert_stats(result, sink, "radius", "radius")
