@@ -12,6 +12,9 @@ from scipy.sparse.csgraph import connected_components
 
 from flocklab import kernels
 from flocklab.kernels.space import rng
+from flocklab.kernels.space.graph import MetricGraph, count_roots, reset_parent
+from flocklab.kernels.space.grid import Grid
+from flocklab.kernels.space.state import SortedState
 from flocklab.schemas import Scenario
 from tests import test_grid, test_grid_3d
 from tests.reference import adjacency, vicsek_step, vicsek_step_3d
@@ -73,6 +76,30 @@ def test_grid_beyond_the_half_diagonal_has_every_pair(taichi_cpu, dim):
     helper = test_grid if dim == 2 else test_grid_3d
     want = helper.assert_same(pos, L * math.sqrt(dim) / 2 * 1.001, L, False)
     assert want.sum() == 150 * 149
+
+
+@pytest.mark.parametrize("case", CASES, ids=case_id)
+def test_the_half_visit_graph_counts_each_edge_once(taichi_cpu, case):
+    """MetricGraph's symmetric half visit (degrees, components, and the by-id forest of
+    Theorem 2's tracking) at the same radii: every unordered pair once."""
+    dim, frac = case
+    r = frac * L
+    pos = np.random.default_rng(7).uniform(0, L, size=(40, dim))
+    want = adjacency(pos, r, L, True)
+    grid = Grid(len(pos), r, L, test_grid.policy(), dim=dim)
+    st = SortedState({"pos": pos})
+    grid.build(st["pos"])
+    st.resort(grid)
+    graph = MetricGraph(len(pos), r, True, True, dim=dim)
+    obs = graph.observe(grid, st["pos"], st.ids)
+    deg = np.empty(len(pos), dtype=np.int64)
+    deg[st.ids_numpy()] = graph.deg.to_numpy()
+    np.testing.assert_array_equal(deg, want.sum(axis=1))
+    assert obs["components"] == connected_components(want, directed=False)[0]
+    by_id = graph.parent  # a forest indexed by agent id, as the linked-interval tracking's
+    reset_parent(by_id)
+    graph.union_edges(grid, st["pos"], st.ids, parent=by_id)
+    assert count_roots(by_id) == obs["components"]
 
 
 def check_graph_observables(result, frames, r: float, inclusive: bool) -> None:
