@@ -49,6 +49,7 @@ def run(
     steps = scenario.time.steps
     dt = scenario.time.dt
     arrays = [a for a in rec.arrays if a in type(scenario.model).state_arrays]
+    derived = rec.derived  # degree, radius: computed from the state at the frame's step
     series: dict[str, list[float]] = {"step": [], "time": []}
     status, error, done = "completed", None, 0
     last_progress = last_poll = time.perf_counter()
@@ -61,8 +62,11 @@ def run(
             series.setdefault(k, []).append(v)
 
     def record(step: int) -> None:
-        if sink is not None and rec.enabled and arrays:
-            sink.frame(step, step * dt, model.frame(arrays))
+        if sink is not None and rec.enabled and (arrays or derived):
+            values = model.frame(arrays)
+            if derived:
+                values.update(model.derived_arrays(step, derived))
+            sink.frame(step, step * dt, values)
 
     try:
         for step in range(steps):
@@ -138,6 +142,8 @@ def _fused_key(scenario: Scenario):
         return None
     if scenario.dimension not in cls.dimensions:  # e.g. a 2D-only fused kernel in 3D
         return None
+    if scenario.recording.enabled and scenario.recording.derived:
+        return None  # the fused kernels keep no per-agent degree or radius at frame steps
     return cls.batch_key(scenario)
 
 

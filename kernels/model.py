@@ -46,6 +46,14 @@ class ModelKernel(ABC):
     def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
         """The requested per-agent arrays this model has, in agent-id order."""
 
+    def derived_arrays(self, step: int, names: list[str]) -> dict[str, np.ndarray]:
+        """The requested per-agent arrays computed from the state at `step` (names from
+        `recording.derived`: "degree", "radius"), in agent-id order. Called after
+        `observe(step)` when both are due, before `step(step)`; it must leave the
+        trajectory unchanged. The schema refuses a name the model does not list in its
+        `derived_arrays`, so a model without any never gets here."""
+        raise NotImplementedError(f"model {self.kind} records no derived arrays")
+
     def convergence_keys(self) -> list[str]:
         """Observables that go to zero on convergence (time-to-converge is reported)."""
         return []

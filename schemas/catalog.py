@@ -25,6 +25,9 @@ class ModelParams(Strict):
     paper_inclusive: ClassVar[bool] = True
     # Per-agent state the model has, a subset of ("position", "velocity", "heading").
     state_arrays: ClassVar[tuple[str, ...]] = ("position",)
+    # Per-agent arrays derived from the state that the model can record, a subset of
+    # DERIVED_ARRAYS ("degree": |N_i| in its interaction graph, "radius": its own R_i).
+    derived_arrays: ClassVar[tuple[str, ...]] = ()
     # The observables the model reports, when it declares them (then a scenario may
     # choose among them with recording.observables); None: not declared.
     observables: ClassVar[tuple[str, ...] | None] = None
@@ -72,6 +75,7 @@ def describe_models() -> list[dict[str, Any]]:
                 "equations": cls.equations,
                 "paper_inclusive": cls.paper_inclusive,
                 "state": list(cls.state_arrays),
+                "derived_arrays": list(cls.derived_arrays),
                 "observables": None if cls.observables is None else list(cls.observables),
                 "dimensions": list(cls.dimensions),
                 "dimensions_note": cls.dimensions_note,

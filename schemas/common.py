@@ -223,6 +223,10 @@ class TimeSpec(Strict):
     )
 
 
+# The recordable per-agent arrays computed from the state rather than held in it (a model
+# lists those it has in `derived_arrays`).
+DERIVED_ARRAYS = ("degree", "radius")
+
 class Recording(Strict):
     """What to record and how often. Frames go to the H5MD trajectory file."""
 
@@ -230,9 +234,14 @@ class Recording(Strict):
         default=0, description="Record a frame every k steps (0: no frames; the last "
         "frame is always recorded when k > 0)."
     )
-    arrays: list[Literal["position", "velocity", "heading"]] = Field(
+    arrays: list[Literal["position", "velocity", "heading", "degree", "radius"]] = Field(
         default=["position"],
-        description="Per-agent arrays to record; a model records those it has.",
+        description="Per-agent arrays to record. position, velocity, heading: the state; "
+        "a model records those it has. degree: each agent's |N_i| in the model's "
+        "interaction graph (the metric graph, or the fixed graph of flocking fixed); "
+        "radius: each agent's own R_i (flocking_obstacles, eq. 4). degree and radius are "
+        "refused by a model without them, and take the per-step engine path "
+        "(docs/TRAJECTORIES.md).",
     )
     max_frames: PositiveInt = Field(default=10_000, description="Refuse runs with more frames.")
     observables_every: PositiveInt = Field(
@@ -260,6 +269,11 @@ class Recording(Strict):
     @property
     def enabled(self) -> bool:
         return self.every > 0
+
+    @property
+    def derived(self) -> list[str]:
+        """The requested arrays computed from the state rather than held in it."""
+        return [a for a in self.arrays if a in DERIVED_ARRAYS]
 
 
 Backend = Literal["cpu", "cuda", "vulkan", "auto"]

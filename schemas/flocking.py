@@ -191,6 +191,7 @@ class DoubleIntegratorParams(ModelParams):
     """Parameters shared by the double-integrator flocking models (M2, M3)."""
 
     state_arrays: ClassVar[tuple[str, ...]] = ("position", "velocity", "heading")
+    derived_arrays: ClassVar[tuple[str, ...]] = ("degree",)
 
     potential: PotentialSpec = Field(default=PotentialSpec(), description="Pair potential.")
     integrator: Integrator = Field(

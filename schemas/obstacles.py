@@ -56,6 +56,7 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
         "around point and disc obstacles, halving their radius when stuck."
     )
     paper_inclusive: ClassVar[bool] = True
+    derived_arrays: ClassVar[tuple[str, ...]] = ("degree", "radius")
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     dimensions_note: ClassVar[str] = "in 3D: point and sphere obstacles (discs with 3D centres)"
 

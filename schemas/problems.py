@@ -31,7 +31,7 @@ class Problem(BaseModel):
 
 
 # Fields whose cross-block checks (Scenario's model validator) start "<field>: message".
-CROSS_CHECKED = ("model", "space.dimension")
+CROSS_CHECKED = ("model", "space.dimension", "recording.arrays")
 
 
 def field_errors(exc: ValidationError, prefix: tuple[str | int, ...] = ()) -> list[FieldError]:

@@ -99,6 +99,21 @@ class Scenario(Strict):
             raise ValueError("space.dimension: initial.heading_range is 2D; in 3D the "
                              "initial directions are uniform on the sphere")
 
+    def _check_derived_arrays(self) -> None:
+        """recording.arrays names only the derived arrays the model has (degree, radius)."""
+        model = type(self.model)
+        missing = [a for a in self.recording.derived if a not in model.derived_arrays]
+        if not missing:
+            return
+        has = [*model.state_arrays, *model.derived_arrays]
+        why = {"degree": "it keeps no per-agent degree",
+               "radius": "its agents share one radius, neighbours.radius (per-agent radii "
+                         "R_i: flocking_obstacles)"}
+        raise ValueError(
+            f"recording.arrays: model {self.model.kind} cannot record "
+            f"{', '.join(missing)} ({'; '.join(why[a] for a in missing)}); it records "
+            f"{', '.join(has)}")
+
     @model_validator(mode="after")
     def _cross_checks(self) -> Scenario:
         n = self.n_agents
@@ -126,15 +141,10 @@ class Scenario(Strict):
             and not isinstance(self.space, PeriodicBox)
         ):
             raise ValueError("initial.region is required on the unbounded plane")
-        if (
-            self.neighbours is not None
-            and isinstance(self.space, PeriodicBox)
-            and self.neighbours.radius * 2 > self.space.L
-        ):
-                raise ValueError(
-                    f"neighbours.radius = {self.neighbours.radius:g} exceeds L/2 = "
-                    f"{self.space.L / 2:g}: the minimum image would be ambiguous"
-                )
+        # Any radius in the periodic box: each pair interacts through its minimum image
+        # only, which also holds beyond L/2, where a ball of radius r wraps onto itself;
+        # from the half-diagonal L sqrt(dim) / 2 on, every pair is within r.
+        self._check_derived_arrays()
         chosen = self.recording.observables
         if chosen is not None:
             known = type(self.model).observables

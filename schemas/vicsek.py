@@ -38,6 +38,7 @@ class VicsekParams(ModelParams):
     summary: ClassVar[str] = "Constant-speed agents aligning headings with their neighbours."
     paper_inclusive: ClassVar[bool] = True
     state_arrays: ClassVar[tuple[str, ...]] = ("position", "heading")
+    derived_arrays: ClassVar[tuple[str, ...]] = ("degree",)
     observables: ClassVar[tuple[str, ...] | None] = (
         "polarization", "heading_spread", "leader_error", "components", "degree_mean",
         "degree_min", "degree_max", "isolated", "linked_intervals")

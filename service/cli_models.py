@@ -34,6 +34,8 @@ def print_model(m: dict[str, Any]) -> None:
     print(f"  equations: {m['equations']}")
     print(f"  neighbourhood: |r_ij| {'<=' if m['paper_inclusive'] else '<'} radius "
           f"(paper's choice); state: {', '.join(m['state'])}")
+    if m.get("derived_arrays"):
+        print(f"  also recordable per agent: {', '.join(m['derived_arrays'])}")
     if m.get("observables"):
         print(f"  observables: {', '.join(m['observables'])}")
     note = f" ({m['dimensions_note']})" if m.get("dimensions_note") else ""

@@ -6,7 +6,9 @@ Layout (H5MD 1.1, https://www.nongnu.org/h5md/h5md.html):
                              boundary = periodic|none (xD), edges = [L] * D
   /particles/swarm/<array>   step (F,), time (F,), value (F, N, D) or (F, N)
                              array: position, velocity, heading (heading is flocklab's:
-                             (F, N) angles in 2D, (F, N, 3) unit vectors in 3D)
+                             (F, N) angles in 2D, (F, N, 3) unit vectors in 3D), and
+                             the derived per-agent arrays degree (F, N) int32 and
+                             radius (F, N) (flocklab's, docs/TRAJECTORIES.md)
   /particles/swarm/image     step, time, value (F, N, D) int32: periodic image of each
                              agent, so position + image * edges is its unwrapped track
                              (written when exact: see `image_is_exact`)
@@ -110,12 +112,13 @@ class H5MDWriter:
                          chunks=(1024,))
         self._unit(g.create_dataset("time", shape=(0,), maxshape=(None,), dtype=np.float64,
                                     chunks=(1024,)), self.time_unit)
-        dtype = np.int32 if name == "image" else self.dtype
+        # Counts are integers: the image and the degree (whatever recording.precision).
+        dtype = np.int32 if name in ("image", "degree") else self.dtype
         ds = g.create_dataset("value", shape=(0, *shape), maxshape=(None, *shape),
                               dtype=dtype, chunks=(1, *shape), **self.compression)
         # A 3D heading is a unit vector, without a unit.
         unit = {"position": self.length_unit, "heading": "rad" if value.ndim == 1 else None,
-                "velocity": self._velocity_unit()}.get(name)
+                "velocity": self._velocity_unit(), "radius": self.length_unit}.get(name)
         self._unit(ds, unit)
 
     def _velocity_unit(self) -> str | None:

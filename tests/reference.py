@@ -85,3 +85,22 @@ def vicsek_step_3d(pos, e, *, r, L, inclusive, v0dt, eta=0.0, u1=None, u2=None,
     if L is not None:
         x = np.mod(x, L)
     return x, new
+
+
+def degrees(pos: np.ndarray, r: float, L: float | None, inclusive: bool) -> np.ndarray:
+    """|N_i| of every agent in the metric graph (minimum image in a periodic box, which
+    for r > L/2 counts each other agent once, at its nearest image)."""
+    return adjacency(pos, r, L, inclusive).sum(axis=1)
+
+
+def degrees_per_agent_radius(pos: np.ndarray, radii: np.ndarray, rule: str,
+                             inclusive: bool) -> np.ndarray:
+    """|N_i| on the plane with per-agent radii (paper 002): N_i = {j != i : |r_ij| <= R_ij}
+    (or <), R_ij = R_i (rule "own") or min(R_i, R_j) (rule "min")."""
+    d = displacements(pos, None)
+    d2 = (d * d).sum(axis=-1)
+    r = radii[:, None] if rule == "own" else np.minimum(radii[:, None], radii[None, :])
+    r2 = np.broadcast_to(r * r, d2.shape)
+    a = d2 <= r2 if inclusive else d2 < r2
+    np.fill_diagonal(a, False)
+    return a.sum(axis=1)

@@ -53,7 +53,7 @@ def test_good_scenario_round_trips_canonically():
     ("initial.N", 0, "initial.N", "greater than 0"),
     ("initial.N", 10**9, "initial.N", "less than or equal"),
     ("space.L", 1e301, "space.L", "less than or equal"),
-    ("neighbours.radius", 6, "(root)", "exceeds L/2"),
+    ("model.rule", "laplacian", "model", "needs g > N"),
     ("model.colour", "red", "model.colour", "Extra inputs"),
     ("backend", "tpu", "backend", "Input should be"),
 ])

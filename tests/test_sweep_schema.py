@@ -120,8 +120,9 @@ def test_invalid_value_names_the_run_and_the_field():
     with pytest.raises(SweepError) as exc:
         Sweep.model_validate(sweep(axes=[{"path": "model.eta", "values": [-1.0]}])).expand()
     assert exc.value.errors[0].loc == "runs[0].model.eta"
-    # A cross-block check of the scenario: radius > L/2 at one grid point.
-    assert locs(sweep(axes=[{"path": "space.L", "values": [5.0, 1.5]}])) == ["runs[1]"]
+    # A cross-block check of the scenario: rule laplacian without g at one grid point.
+    assert locs(sweep(axes=[{"path": "model.rule", "values": ["vicsek", "laplacian"]}])
+                ) == ["runs[1].model"]
 
 
 def test_structural_errors():

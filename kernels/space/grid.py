@@ -19,6 +19,11 @@ in the 3x3 block (3D: 3x3x3) of cells around agent i, with the minimum-image dis
 d = r_k - r_i. `pair` applies the distance test itself (models differ: < or <=, per-agent
 radii). On the plane, hash collisions are filtered by comparing exact cell ids, so no
 agent is ever visited twice. No bucket has a fixed capacity: nothing can overflow.
+In the box, once fewer than 3 cells fit across (r > L/3, or a sparse box's capped cell
+count), the 3x3 block would meet a cell twice: the visit then reads every cell once and
+takes each agent's minimum image, so any radius is right, r > L/2 and past the
+half-diagonal included (one image per pair). It is a branch per agent on the cell count,
+not per pair: the common case's loops are the same code as before.
 
 Cells are a hair wider than the radius (`widen()`), so rounding in floor() can never
 place two agents within the radius two cells apart. The rounding of a cell coordinate is

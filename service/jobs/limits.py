@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 from flocklab.schemas import FieldError, Scenario
 
 # Components per agent of each recordable array.
-COMPONENTS = {"position": 2, "velocity": 2, "heading": 1}
+COMPONENTS = {"position": 2, "velocity": 2, "heading": 1, "degree": 1, "radius": 1}
 # Bytes per stored value of the frames (`recording.precision`).
 BYTES_PER_VALUE = {"float64": 8, "float32": 4}
 # The periodic image (int32 x 2) that goes with each recorded position in a periodic box
@@ -53,7 +53,8 @@ class Limits:
 
 def recorded_components(scenario: Scenario) -> int:
     """Values stored per agent and frame: the recorded arrays the model actually has."""
-    has = set(type(scenario.model).state_arrays)
+    model = type(scenario.model)
+    has = {*model.state_arrays, *model.derived_arrays}
     return sum(COMPONENTS[a] for a in set(scenario.recording.arrays) if a in has)
 
 

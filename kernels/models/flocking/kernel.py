@@ -140,6 +140,7 @@ class FlockingKernel(ModelKernel):
         self.indices = _i32(max(len(indices), 1))
         if len(indices):
             self.indices.from_numpy(indices)
+        self.fixed_degree = np.diff(indptr).astype(np.int32)  # agent-id order, for ever
         adj = fo.graph_matrix(n, u, v)
         n_comp = fo.components(adj)
         self.graph_info = {
@@ -150,7 +151,7 @@ class FlockingKernel(ModelKernel):
         self.graph_obs = {
             "components": float(n_comp),
             "lambda2": self.graph_info["lambda2"],
-            **fo.valency_stats(np.diff(indptr), self.p.valency_per_agent_max),
+            **fo.valency_stats(self.fixed_degree, self.p.valency_per_agent_max),
         }
 
     def _init_grid(self, scenario: Scenario) -> None:
@@ -280,13 +281,7 @@ class FlockingKernel(ModelKernel):
                       kinetic: float) -> dict[str, float]:
         st = self.state
         ids = st.ids_numpy()
-        reset_parent(self.parent)
-        observe = grid_observe_kernel(self.flags["rule"], self.flags["inclusive"],
-                                      self._search(self.grid), self.dim)
-        observe(st["pos"], self._rad(), self.prm, self.parent, self.deg, self.near_d2,
-                self.near_k, self.pot, *self.grid.view())
-        deg = np.empty(self.n, dtype=np.int64)
-        deg[ids] = self.deg.to_numpy()
+        deg = self._grid_valencies(ids)
         n_comp = count_roots(self.parent)
         reduced = 0.5 * float(wide(self.pot).sum()) + kinetic
         obs = {"Q_reduced": reduced, "Q": reduced + self._q_constant(),
@@ -310,6 +305,33 @@ class FlockingKernel(ModelKernel):
                                             self.p.lambda2_max_agents)
         obs["lambda2"] = lam
         return obs
+
+    def _grid_valencies(self, ids: np.ndarray) -> np.ndarray:
+        """Run the observation kernel on the sorted state (valencies |N_i|, nearest
+        candidates, saturated potentials, components into `parent`); the valencies in
+        agent-id order (`ids`: the agent in each slot)."""
+        st = self.state
+        reset_parent(self.parent)
+        observe = grid_observe_kernel(self.flags["rule"], self.flags["inclusive"],
+                                      self._search(self.grid), self.dim)
+        observe(st["pos"], self._rad(), self.prm, self.parent, self.deg, self.near_d2,
+                self.near_k, self.pot, *self.grid.view())
+        deg = np.empty(self.n, dtype=np.int32)
+        deg[ids] = self.deg.to_numpy()
+        return deg
+
+    def derived_arrays(self, step: int, names: list[str]) -> dict[str, np.ndarray]:
+        """degree: |N_i| as the valency observables count it (the fixed graph's degree, or
+        the metric graph's from the same observation kernel); radius (M3): R_i."""
+        self._sort(step)  # the sort step(step) would do: no bit of the run changes
+        ids = self.state.ids_numpy()
+        out = {}
+        if "degree" in names:
+            out["degree"] = (self.fixed_degree.copy() if self.fixed
+                             else self._grid_valencies(ids))
+        if "radius" in names:
+            out["radius"] = self.state.in_id_order("rad", ids)
+        return out
 
     def component_labels(self) -> np.ndarray:
         """Connected-component label of each slot, from the last observation's union-find."""

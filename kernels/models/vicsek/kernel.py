@@ -238,6 +238,7 @@ class VicsekKernel(ModelKernel):
             reset_parent(self.parent_u)
             self.linked = {"count": 0, "longest": 0, "open_since": 0}
         self._advanced_for = -1  # the step whose next state observe() already computed
+        self._graph_for = -1  # the step whose G(t) graph.deg holds (slot order)
 
     def _advance(self, step: int, with_graph: bool) -> None:
         """Compute the state at step + 1 into the scratch buffers (and, with_graph, the
@@ -255,6 +256,8 @@ class VicsekKernel(ModelKernel):
             self.graph.parent, self.graph.deg, *self.grid.view(),
         )
         self._advanced_for = step
+        if with_graph:
+            self._graph_for = step
 
     def step(self, step: int) -> None:
         self.state.sort(self.grid, step)
@@ -275,6 +278,7 @@ class VicsekKernel(ModelKernel):
         """Theorem 2: contiguous intervals over which the union of the graphs is connected."""
         st = self.state
         self.graph.union_edges(self.grid, st["pos"], st.ids, parent=self.parent_u)
+        self._graph_for = -1  # that pass wrote its own degrees over graph.deg
         if count_roots(self.parent_u) == 1:
             lk = self.linked
             lk["count"] += 1
@@ -334,6 +338,16 @@ class VicsekKernel(ModelKernel):
             th = self._headings(ids)
             out["velocity"] = self.p.v0 * np.stack([np.cos(th), np.sin(th)], axis=1)
         return out
+
+    def derived_arrays(self, step: int, names: list[str]) -> dict[str, np.ndarray]:
+        """degree: |N_i| in G(step), from the step's own neighbour visit, as the degree_*
+        observables count it (an observation at this step has already made it)."""
+        self.state.sort(self.grid, step)  # the sort step(step) would do: no bit changes
+        if self._graph_for != step:
+            self._advance(step, with_graph=True)  # step(step) then reuses the next state
+        deg = np.empty(self.n, dtype=np.int32)
+        deg[self.state.ids_numpy()] = self.graph.deg.to_numpy()
+        return {"degree": deg}
 
     def _theta(self, arrays: dict[str, ti.Ndarray]) -> ti.Ndarray:
         return arrays.get("theta", self._no_theta)
