@@ -9,6 +9,10 @@ The leader path p(t) is a straight line or a spline through waypoints, timed by 
 then still at its end. F1's offsets b_i come from a named formation or are given, and a
 schedule may rotate the formation or morph it into another over time intervals.
 d is the scenario's `neighbours.radius`.
+
+In 3D (`space.dimension = 3`) f and g act along the same unit vectors, so the laws are
+unchanged: the path's points, the offsets and the rotation axes are 3-vectors
+(docs/MODELS_3D.md).
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from typing import TYPE_CHECKING, Annotated, ClassVar, Literal
 
 from pydantic import Field, model_validator
 
-from .base import PositiveInt, PositiveReal, Real, Strict, Vec2
+from .base import Point, PositiveInt, PositiveReal, Real, Strict, Vec3
 from .catalog import ModelParams, register_model
 from .common import Plane
 
@@ -80,8 +84,9 @@ Repulsion = Annotated[InverseG | InverseSquareG, Field(discriminator="kind")]
 
 
 class _Timed(Strict):
-    start: Vec2 | None = Field(
-        default=None, description="p(0); default: the initial centroid of the agents."
+    start: Point | None = Field(
+        default=None, description="p(0); default: the initial centroid of the agents "
+        "((x, y), or (x, y, z) in 3D)."
     )
     speed: PositiveReal | None = Field(
         default=None, description="Leader speed along the path (length/time)."
@@ -101,7 +106,7 @@ class StraightPath(_Timed):
     """p(t) moves on a straight line from p(0) to the target r_t, then p(t) = r_t (t >= T)."""
 
     kind: Literal["straight"] = "straight"
-    target: Vec2 = Field(description="r_t, where the leader stops.")
+    target: Point = Field(description="r_t, where the leader stops.")
 
 
 class SplinePath(_Timed):
@@ -109,7 +114,7 @@ class SplinePath(_Timed):
     knots) at constant speed along its arc length, then stays at the last waypoint."""
 
     kind: Literal["spline"] = "spline"
-    waypoints: list[Vec2] = Field(
+    waypoints: list[Point] = Field(
         min_length=1, max_length=MAX_WAYPOINTS,
         description="Points after p(0); the last is the target r_t.",
     )
@@ -128,7 +133,8 @@ Path = Annotated[StraightPath | SplinePath, Field(discriminator="kind")]
 
 # --- F1: the offsets b_i ------------------------------------------------------------------
 
-Shape = Literal["line", "column", "wedge", "diamond", "circle", "hex"]
+Shape = Literal["line", "column", "wedge", "diamond", "circle", "hex", "cube", "shell"]
+SHAPES_3D = ("cube", "shell")  # the shapes that need space.dimension = 3
 
 
 class NamedFormation(Strict):
@@ -137,12 +143,16 @@ class NamedFormation(Strict):
     line = abreast along y, wedge = a filled triangle with its apex at +x (rows 1, 2, 3...
     of the triangular lattice), diamond = a k x k square lattice turned 45 deg (apex at +x),
     circle = N agents on a circle with adjacent ones d apart, hex = the N triangular-lattice
-    points nearest the origin."""
+    points nearest the origin. 3D only: cube = a cubic lattice of spacing d, m = ceil(N^(1/3))
+    a side, filled x fastest, then y, then z; shell = N points of a Fibonacci sphere, its
+    radius chosen so that the nearest pair is d apart. In 3D the plane shapes lie in the
+    xy plane (z = 0) and `orientation` turns about the z axis."""
 
     kind: Literal["named"] = "named"
     shape: Shape = Field(description="Formation shape.")
     orientation: Real = Field(
-        default=0.0, description="Rotation of the whole shape, counter-clockwise (radians)."
+        default=0.0, description="Rotation of the whole shape, counter-clockwise (radians; "
+        "about the z axis in 3D)."
     )
 
 
@@ -150,18 +160,26 @@ class ExplicitFormation(Strict):
     """Offsets b_i given in agent-id order; their mean must be zero (paper condition 1)."""
 
     kind: Literal["explicit"] = "explicit"
-    offsets: list[Vec2] = Field(min_length=1, description="N offsets b_i (x, y).")
+    offsets: list[Point] = Field(
+        min_length=1, description="N offsets b_i: (x, y) rows, or (x, y, z) rows in 3D.")
+
+    @property
+    def dimension(self) -> int:
+        """The number of columns of the offsets."""
+        return len(self.offsets[0])
 
     @model_validator(mode="after")
     def _mean_zero(self) -> ExplicitFormation:
-        n = len(self.offsets)
-        mx = math.fsum(b[0] for b in self.offsets) / n
-        my = math.fsum(b[1] for b in self.offsets) / n
-        scale = max(max(abs(b[0]), abs(b[1])) for b in self.offsets)
-        if math.hypot(mx, my) > 1e-9 * max(scale, 1.0):
+        n, dim = len(self.offsets), self.dimension
+        for k, b in enumerate(self.offsets):
+            if len(b) != dim:
+                raise ValueError(f"offsets[{k}] has {len(b)} coordinates, offsets[0] has {dim}")
+        mean = [math.fsum(b[c] for b in self.offsets) / n for c in range(dim)]
+        scale = max(max(abs(x) for x in b) for b in self.offsets)
+        if math.hypot(*mean) > 1e-9 * max(scale, 1.0):
             raise ValueError(
                 f"offsets must have mean zero (paper condition 1); their mean is "
-                f"({mx:.6g}, {my:.6g})"
+                f"({', '.join(f'{m:.6g}' for m in mean)})"
             )
         return self
 
@@ -171,13 +189,17 @@ FormationSpec = Annotated[NamedFormation | ExplicitFormation, Field(discriminato
 
 class FormationChange(Strict):
     """One change of F1's formation over [start, end]: rotate the formation in force by
-    `rotate` radians about its centre, or morph it into `formation`. The blend weight
+    `rotate` radians about its centre (in 3D about `axis`, default the z axis, by the
+    right-hand rule), or morph it into `formation`. The blend weight
     s(u), u = (t - start)/(end - start), is smoothstep 3u^2 - 2u^3 (velocity continuous)
     or linear; start == end changes abruptly."""
 
     start: Real = Field(ge=0, description="Start of the change (time).")
     end: Real = Field(ge=0, description="End of the change (time).")
     rotate: Real | None = Field(default=None, description="Rotation angle (radians).")
+    axis: Vec3 | None = Field(
+        default=None, description="3D only: the rotation axis (any length but zero); "
+        "default the z axis.")
     formation: FormationSpec | None = Field(default=None, description="Formation to morph to.")
     relaxation: Literal["smoothstep", "linear"] = Field(
         default="smoothstep", description="Blend profile over the interval."
@@ -189,6 +211,11 @@ class FormationChange(Strict):
             raise ValueError(f"change ends ({self.end:g}) before it starts ({self.start:g})")
         if (self.rotate is None) == (self.formation is None):
             raise ValueError("a formation change needs exactly one of rotate and formation")
+        if self.axis is not None:
+            if self.rotate is None:
+                raise ValueError("axis applies only to a rotation (rotate)")
+            if not any(self.axis):
+                raise ValueError("axis must not be the zero vector")
         return self
 
 
@@ -211,6 +238,9 @@ class FormationParams(ModelParams):
     )
     paper_inclusive: ClassVar[bool] = False
     state_arrays: ClassVar[tuple[str, ...]] = ("position", "velocity")
+    dimensions: ClassVar[tuple[int, ...]] = (2, 3)
+    dimensions_note: ClassVar[str] = (
+        "3D: 3-vector paths and offsets, shapes cube and shell, rotations about an axis")
 
     kind: Literal["formation"] = "formation"
     design: Literal["F1", "F2"] = Field(
@@ -274,6 +304,7 @@ class FormationParams(ModelParams):
                         f"schedule[{j}] starts at {self.schedule[j].start:g}, before "
                         f"schedule[{j - 1}] ends at {self.schedule[j - 1].end:g}"
                     )
+        self._check_dimension(scenario.dimension)
         f = self.attraction
         speed = self.path.speed
         if isinstance(f, SaturatingF) and speed is not None and speed >= f.v_max:
@@ -281,3 +312,31 @@ class FormationParams(ModelParams):
                 f"path.speed = {speed:g} >= attraction.v_max = {f.v_max:g}: "
                 "the agents could never keep up (eq. 8 has no solution)"
             )
+
+    def _check_dimension(self, dim: int) -> None:
+        """Every point, offset and axis has `dim` coordinates; cube and shell are 3D."""
+        path = self.path
+        points = [("path.start", path.start)] if path.start is not None else []
+        if isinstance(path, StraightPath):
+            points.append(("path.target", path.target))
+        else:
+            points += [(f"path.waypoints[{k}]", w) for k, w in enumerate(path.waypoints)]
+        for name, point in points:
+            if len(point) != dim:
+                raise ValueError(f"{name} has {len(point)} coordinates; space.dimension is "
+                                 f"{dim}")
+        formations = [("formation", self.formation)] + [
+            (f"schedule[{j}].formation", c.formation) for j, c in enumerate(self.schedule)]
+        for name, fm in formations:
+            if isinstance(fm, ExplicitFormation) and fm.dimension != dim:
+                cols = "(x, y)" if fm.dimension == 2 else "(x, y, z)"
+                raise ValueError(
+                    f"{name}.offsets have {fm.dimension} columns {cols}; space.dimension = "
+                    f"{dim} needs {dim} columns per offset")
+            if isinstance(fm, NamedFormation) and fm.shape in SHAPES_3D and dim != 3:
+                raise ValueError(f"{name}: shape {fm.shape!r} is a 3D formation and runs in "
+                                 f"3D only; space.dimension is {dim}")
+        for j, c in enumerate(self.schedule):
+            if c.axis is not None and dim != 3:
+                raise ValueError(f"schedule[{j}].axis is 3D only (a 2D rotation is about the "
+                                 f"plane's normal); space.dimension is {dim}")

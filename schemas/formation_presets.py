@@ -1,4 +1,4 @@
-"""Named M4 runs: the three simulations of Xi–Abed (paper 003, Section 4).
+"""Named M4 runs: the three simulations of Xi–Abed (paper 003, Section 4), and a 3D F1 run.
 
 Every parameter the paper leaves out is chosen here and listed in docs/MODELS_M4.md:
 initial area [0, 50]^2, the gains k and k_g, the formations, the leader's timing, dt.
@@ -89,4 +89,38 @@ def sim3() -> dict:
         "time": {"steps": 4000, "dt": 0.01},
         "recording": {"every": 20, "arrays": ["position", "velocity"], "observables_every": 20},
         "seed": 12,
+    }
+
+
+@register_preset(
+    "xi-abed-f1-3d",
+    "examples/formation_3d.json: F1 in 3D, N=32 on a Fibonacci-sphere shell (nearest pair "
+    "d = 20 apart), leader on a spline through 3D waypoints (a climbing turn), the shell "
+    "turned by 90 deg about the x axis over [8, 12] s, 35 s.",
+)
+def f1_3d() -> dict:
+    return {
+        "name": "xi-abed-f1-3d",
+        "model": {
+            "kind": "formation",
+            "design": "F1",
+            "attraction": {"kind": "linear", "k": 1.0},
+            "repulsion": {"kind": "inverse", "k_g": 100.0},
+            "path": {
+                "kind": "spline",
+                "waypoints": [[60.0, 25.0, 45.0], [25.0, 60.0, 65.0], [-10.0, 25.0, 85.0]],
+                "arrival_time": 25.0,
+            },
+            "formation": {"kind": "named", "shape": "shell"},
+            "schedule": [{"start": 8.0, "end": 12.0, "rotate": math.pi / 2,
+                          "axis": [1.0, 0.0, 0.0]}],
+        },
+        "space": {"kind": "plane", "dimension": 3},
+        "neighbours": {"radius": 20.0},
+        "initial": {"kind": "random", "N": 32,
+                    "region": {"kind": "box", "low": [0.0, 0.0, 0.0],
+                               "high": [50.0, 50.0, 50.0]}},
+        "time": {"steps": 3500, "dt": 0.01},
+        "recording": {"every": 10, "arrays": ["position", "velocity"], "observables_every": 10},
+        "seed": 1,
     }

@@ -104,3 +104,43 @@ def degrees_per_agent_radius(pos: np.ndarray, radii: np.ndarray, rule: str,
     a = d2 <= r2 if inclusive else d2 < r2
     np.fill_diagonal(a, False)
     return a.sum(axis=1)
+
+
+def formation_rates(x, targets, *, f, g, d):
+    """Xi-Abed's right-hand side in any dimension (paper 003 eq. 1-5): rdot_i =
+    f(|l_i - r_i|) (l_i - r_i)/|l_i - r_i| + sum_{0 < |r_ji| < d} g(|r_ji|) r_ji/|r_ji|,
+    with l_i the rows of `targets`; f and g as the schema dicts ({"kind": ..., gains})."""
+    z = targets - x
+    s = np.linalg.norm(z, axis=1)[:, None]
+    safe = np.where(s > 0, s, 1.0)
+    if f["kind"] == "linear":
+        v = f["k"] * z
+    elif f["kind"] == "quadratic":
+        v = f["c"] * (s * s + s) * z / safe
+    else:
+        v = f["v_max"] * np.tanh(f["k"] * s / f["v_max"]) * z / safe
+    diff = displacements(x, None)  # [i, j] = r_j - r_i
+    dist = np.linalg.norm(diff, axis=2)
+    near = (dist < d) & ~np.eye(len(x), dtype=bool)
+    r = np.where(near, dist, 1.0)
+    if g["kind"] == "inverse":
+        mag = -g["k_g"] * (1.0 / r - 1.0 / d)
+    else:
+        mag = -g["k_g"] * (1.0 / r**2 - 1.0 / d**2)
+    w = np.where(near, mag / r, 0.0)
+    return v + (w[..., None] * diff).sum(axis=1)
+
+
+def formation_step(x, t, dt, targets_at, *, f, g, d, integrator="euler"):
+    """One explicit Euler or classical RK4 step of `formation_rates`, with the attraction
+    points `targets_at(t)` ((N, dim)) re-evaluated at each stage's time."""
+    def rates(y, s):
+        return formation_rates(y, targets_at(s), f=f, g=g, d=d)
+
+    if integrator == "euler":
+        return x + dt * rates(x, t)
+    k1 = rates(x, t)
+    k2 = rates(x + 0.5 * dt * k1, t + 0.5 * dt)
+    k3 = rates(x + 0.5 * dt * k2, t + 0.5 * dt)
+    k4 = rates(x + dt * k3, t + dt)
+    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)

@@ -10,6 +10,8 @@ Taichi side, selected at compile time by kind (F_*, G_* below), runtime gains in
                  inverse_square g(s) = -k_g (1/s^2 - 1/d^2)
   pair_energy(s) = G(s) = int_d^s g                (the pair term of V1, eq. 10, and V2, eq. 16)
   leader(i)    = the point agent i is attracted to: p(t) (F2) or p(t) + b_i(t) (F1)
+Every vector is a dim-vector (2 or 3, compile time); the 3D parameter array `P3` holds p(t)
+and the formation weights as 3-vectors and 3x3 matrices.
 numpy side: F(s) = int_0^s f (the leader term of V1/V2) and the steady lag |a| = f^-1(|q|)
 solving eq. 8.
 """
@@ -29,20 +31,46 @@ LEAD = Slots("PX", "PY", "A00", "A01", "A10", "A11", "B00", "B01", "B10", "B11")
 # The parameter array of every formation kernel: the gains, then LEAD for each of the three
 # time slots s (0: t, 1: t + dt/2, 2: t + dt).
 P = Slots("FA", "FB", "KG", "D", "D2", "DT", LEAD=3 * LEAD.size)
+# 3D: p(t) with three components and the 3x3 weights (row-major) of A and B, one block each
+# (named for its first slot, as in LEAD).
+LEAD3 = Slots("PX", "PY", "PZ", A00=9, B00=9)
+P3 = Slots("FA", "FB", "KG", "D", "D2", "DT", LEAD=3 * LEAD3.size)  # the gains as in P
 
 
-def force_params(p: FormationParams, d: float, dt: float) -> np.ndarray:
+def lead_slots(dim: int) -> tuple[Slots, Slots]:
+    """(P, LEAD) of a dimension."""
+    return (P, LEAD) if dim == 2 else (P3, LEAD3)
+
+
+def force_params(p: FormationParams, d: float, dt: float, dim: int = 2) -> np.ndarray:
     """The parameter array with the gains set (the time slots zero)."""
     f = p.attraction
     fa = f.c if isinstance(f, QuadraticF) else f.k
     fb = f.v_max if isinstance(f, SaturatingF) else 0.0
-    return P.pack(FA=fa, FB=fb, KG=p.repulsion.k_g, D=d, D2=d * d, DT=dt)
+    return lead_slots(dim)[0].pack(FA=fa, FB=fb, KG=p.repulsion.k_g, D=d, D2=d * d, DT=dt)
+
+
+@ti.func
+def leader_3d(i, ids: ti.template(), ba: ti.template(), bb: ti.template(),
+              prm: ti.template(), slot, f1: ti.template(), blend: ti.template()):
+    """leader() in 3D: l_i = p(t) (F2) or p(t) + M_A A[id] + M_B B[id] (F1), M 3x3."""
+    o = P3.LEAD + LEAD3.size * slot
+    r = ti.math.vec3(prm[o + LEAD3.PX], prm[o + LEAD3.PY], prm[o + LEAD3.PZ])
+    if ti.static(f1):
+        a = ids[i]
+        for row in ti.static(range(3)):
+            m = o + LEAD3.A00 + 3 * row
+            r[row] += prm[m] * ba[a, 0] + prm[m + 1] * ba[a, 1] + prm[m + 2] * ba[a, 2]
+            if ti.static(blend):
+                m = o + LEAD3.B00 + 3 * row
+                r[row] += prm[m] * bb[a, 0] + prm[m + 1] * bb[a, 1] + prm[m + 2] * bb[a, 2]
+    return r
 
 
 @ti.func
 def leader(i, ids: ti.template(), ba: ti.template(), bb: ti.template(), prm: ti.template(),
            slot, f1: ti.template(), blend: ti.template()):
-    """l_i = p(t) (F2) or p(t) + M_A A[id] + M_B B[id] (F1)."""
+    """l_i = p(t) (F2) or p(t) + M_A A[id] + M_B B[id] (F1), in 2D."""
     o = P.LEAD + LEAD.size * slot
     r = ti.math.vec2(prm[o + LEAD.PX], prm[o + LEAD.PY])
     if ti.static(f1):
@@ -57,8 +85,8 @@ def leader(i, ids: ti.template(), ba: ti.template(), bb: ti.template(), prm: ti.
 
 @ti.func
 def attract(z, prm: ti.template(), fkind: ti.template()):
-    """f(|z|) z / |z|."""
-    v = ti.math.vec2(0.0)
+    """f(|z|) z / |z| (z a 2- or 3-vector)."""
+    v = ti.Vector.zero(float, z.n)
     if ti.static(fkind == F_KINDS["linear"]):
         v = prm[P.FA] * z
     elif ti.static(fkind == F_KINDS["quadratic"]):

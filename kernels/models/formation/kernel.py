@@ -13,6 +13,10 @@ Two agents at the same position (g singular) stop the run.
 Observables (at observation steps only): formation error against r_id + a with the lag a of
 eq. 8, the centroid's distance to p(t), speeds against the leader's, the minimum pairwise
 distance, V1 (eq. 10) or V2 (eq. 16), and for F2 the properties D1-D3.
+
+3D (`space.dimension = 3`): the same kernels compiled with dim = 3 on the hashed grid's
+27 cells; p(t), b_i(t) and the rates are 3-vectors; `leader_z` and `centroid_z` join the
+observables. The dense regime (dense.py) is 2D: 3D steps are always exact.
 """
 
 from functools import cache
@@ -28,7 +32,7 @@ from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
 from ...space.graph import MetricGraph
-from ...space.grid import Grid, make_visitor, permute, permute_rows, within
+from ...space.grid import Grid, make_visitor, permute, permute_rows, row, within
 from ...space.initial import initial_state
 from ...space.integrate import count_nonfinite, gather_rows, rk4_begin, rk4_finish, rk4_stage
 from ...space.state import SortedState
@@ -36,19 +40,21 @@ from .dense import bucket_aggregates, coarse_euler, max_count, stencil_reach
 from .forces import (
     F_KINDS,
     G_KINDS,
-    LEAD,
     P,
     attract,
     attraction_energy,
     force_params,
     g_over_s,
     lag_length,
+    lead_slots,
     leader,
+    leader_3d,
     pair_energy,
 )
 from .fused import FormationBatch
+from .norms import norms
 from .path import make_path
-from .props import at_leader, d2_isolated, d3_holds, roots
+from .props import at_leader, d2_isolated, d3_holds, d3_holds_3d, roots
 from .schedule import OffsetSchedule
 
 nd = ti.types.ndarray()
@@ -56,8 +62,14 @@ _NO_PAIR = 1e300  # nearest-candidate sentinel
 
 
 @cache
-def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: bool):
-    """Compile-time specialised kernels: one Euler step, rates at a time slot, observation."""
+def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: bool,
+                      dim: int = 2):
+    """Compile-time specialised kernels: one Euler step, rates at a time slot, observation.
+    Positions are dim-vectors (2 or 3); the rate accumulator holds the dim components of
+    the repulsion, then the count of coincident neighbours."""
+    lead = leader if dim == 2 else leader_3d
+    # the observation accumulator: repulsion (dim), coincident, degree, sum of G, nearest d^2
+    CO, DEG, GS, NEAR = dim, dim + 1, dim + 2, dim + 3
 
     @ti.func
     def pair_rate(i, k, dv, acc, S: ti.template()):
@@ -66,47 +78,56 @@ def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: 
         if k != i and within(d2, prm[P.D2], inclusive):
             if d2 > 0.0:
                 w = g_over_s(ti.sqrt(d2), prm, gkind)
-                acc += ti.math.vec3(w * dv[0], w * dv[1], 0.0)
+                add = ti.Vector.zero(float, dim + 1)
+                for c in ti.static(range(dim)):
+                    add[c] = w * dv[c]
+                acc += add
             else:
-                acc[2] += 1.0  # coincident agents
+                acc[CO] += 1.0  # coincident agents
         return acc
 
     @ti.func
     def pair_obs(i, k, dv, acc, S: ti.template()):
-        # acc: repulsion x, y, coincident (unused here), degree, sum of G, nearest d^2
         prm = ti.static(S[0])
         d2 = dv.dot(dv)
         if k != i:
-            acc[5] = ti.min(acc[5], d2)
+            acc[NEAR] = ti.min(acc[NEAR], d2)
             if within(d2, prm[P.D2], inclusive):
-                acc[3] += 1.0
+                acc[DEG] += 1.0
                 if d2 > 0.0:
                     s = ti.sqrt(d2)
                     w = g_over_s(s, prm, gkind)
-                    acc[0] += w * dv[0]
-                    acc[1] += w * dv[1]
-                    acc[4] += pair_energy(s, prm, gkind)
+                    for c in ti.static(range(dim)):
+                        acc[c] += w * dv[c]
+                    acc[GS] += pair_energy(s, prm, gkind)
                 else:
-                    acc[2] += 1.0
+                    acc[CO] += 1.0
         return acc
 
-    visit_rate = make_visitor(pair_rate)
-    visit_obs = make_visitor(pair_obs)
+    visit_rate = make_visitor(pair_rate, dim=dim)
+    visit_obs = make_visitor(pair_obs, dim=dim)
 
     @ti.func
     def rate(i, pos: ti.template(), ids: ti.template(), ba: ti.template(), bb: ti.template(),
              prm: ti.template(), slot, G: ti.template()):
-        """(rdot_x, rdot_y, coincident neighbours) of agent slot i."""
-        xi = ti.math.vec2(pos[i, 0], pos[i, 1])
-        acc = visit_rate(i, xi, ti.math.vec3(0.0), pos, G, ti.static((prm,)), False)
-        v = attract(leader(i, ids, ba, bb, prm, slot, f1, blend) - xi, prm, fkind)
-        return ti.math.vec3(v[0] + acc[0], v[1] + acc[1], acc[2])
+        """(rdot, coincident neighbours) of agent slot i, a (dim + 1)-vector."""
+        xi = row(pos, i, dim)
+        acc = visit_rate(i, xi, ti.Vector.zero(float, dim + 1), pos, G, ti.static((prm,)),
+                         False)
+        v = attract(lead(i, ids, ba, bb, prm, slot, f1, blend) - xi, prm, fkind)
+        out = ti.Vector.zero(float, dim + 1)
+        for c in ti.static(range(dim)):
+            out[c] = v[c] + acc[c]
+        out[CO] = acc[CO]
+        return out
 
     @ti.func
-    def flag(bad: ti.template(), x, y, coincident):
+    def flag(bad: ti.template(), x, coincident):
         if coincident > 0.0:
             ti.atomic_add(bad[1], 1)
-        s = x + y  # NaN if either is NaN or infinite
+        s = x[0]
+        for c in ti.static(range(1, dim)):
+            s += x[c]  # NaN if any is NaN or infinite
         if ti.math.isnan(s) or ti.math.isinf(s):
             ti.atomic_add(bad[0], 1)
 
@@ -115,35 +136,35 @@ def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: 
               start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
             r = rate(i, pos, ids, ba, bb, prm, 0, ti.static((start, cid, gf, gi)))
-            x = pos[i, 0] + prm[P.DT] * r[0]
-            y = pos[i, 1] + prm[P.DT] * r[1]
-            pos_out[i, 0] = x
-            pos_out[i, 1] = y
-            flag(bad, x, y, r[2])
+            x = ti.Vector.zero(float, dim)
+            for c in ti.static(range(dim)):
+                x[c] = pos[i, c] + prm[P.DT] * r[c]
+                pos_out[i, c] = x[c]
+            flag(bad, x, r[CO])
 
     @ti.kernel
     def rates(pos: nd, ids: nd, ba: nd, bb: nd, vel: nd, prm: nd, slot: ti.i32, bad: nd,
               start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
             r = rate(i, pos, ids, ba, bb, prm, slot, ti.static((start, cid, gf, gi)))
-            vel[i, 0] = r[0]
-            vel[i, 1] = r[1]
-            flag(bad, r[0], r[1], r[2])
+            for c in ti.static(range(dim)):
+                vel[i, c] = r[c]
+            flag(bad, r, r[CO])
 
     @ti.kernel
     def observe(pos: nd, ids: nd, ba: nd, bb: nd, vel: nd, aux: nd, prm: nd,
                 start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
-            xi = ti.math.vec2(pos[i, 0], pos[i, 1])
-            init = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0, _NO_PAIR])
+            xi = row(pos, i, dim)
+            init = ti.Vector([0.0] * (dim + 3) + [_NO_PAIR])
             acc = visit_obs(i, xi, init, pos, ti.static((start, cid, gf, gi)),
                             ti.static((prm,)), False)
-            v = attract(leader(i, ids, ba, bb, prm, 0, f1, blend) - xi, prm, fkind)
-            vel[i, 0] = v[0] + acc[0]
-            vel[i, 1] = v[1] + acc[1]
-            aux[i, 0] = acc[3]
-            aux[i, 1] = acc[4]
-            aux[i, 2] = acc[5]
+            v = attract(lead(i, ids, ba, bb, prm, 0, f1, blend) - xi, prm, fkind)
+            for c in ti.static(range(dim)):
+                vel[i, c] = v[c] + acc[c]
+            aux[i, 0] = acc[DEG]
+            aux[i, 1] = acc[GS]
+            aux[i, 2] = acc[NEAR]
 
     return euler, rates, observe
 
@@ -161,37 +182,40 @@ class FormationKernel(ModelKernel):
         self.d = d = scenario.neighbours.radius
         self.dt = dt = scenario.time.dt
         self.f1 = p.design == "F1"
+        self.dim = dim = scenario.dimension
         init = initial_state(scenario)
         self.path = make_path(p.path, init.positions.mean(axis=0))
         if isinstance(p.attraction, SaturatingF):
-            top = float(np.hypot(*self.path.velocity(0.0)))
+            top = float(norms(self.path.velocity(0.0)))
             if top >= p.attraction.v_max:
                 raise ValueError(
                     f"leader speed {top:g} >= attraction.v_max = {p.attraction.v_max:g}: "
                     "the agents could never keep up (eq. 8 has no solution)"
                 )
-        self.schedule = OffsetSchedule(p.formation, p.schedule, n, d) if self.f1 else None
+        self.schedule = (OffsetSchedule(p.formation, p.schedule, n, d, dim) if self.f1
+                         else None)
         self.state = SortedState({"pos": init.positions})
-        self.grid = Grid(n, d, None, policy)
+        self.grid = Grid(n, d, None, policy, dim)
         self.graph: MetricGraph | None = None
-        self.prm_host = force_params(p, d, dt)
+        self.prm_host = force_params(p, d, dt, dim)
         self.prm = ti.ndarray(float, shape=self.prm_host.shape)
         rows = n if self.f1 else 1
-        self.b_dev = [ti.ndarray(float, shape=(rows, 2)) for _ in range(2)]
+        self.b_dev = [ti.ndarray(float, shape=(rows, dim)) for _ in range(2)]
         self.b_held: list[int | None] = [None, None]
         self.bad = ti.ndarray(ti.i32, shape=2)
         self.fkind = F_KINDS[p.attraction.kind]
         self.gkind = G_KINDS[p.repulsion.kind]
         self.inclusive = scenario.inclusive
         if p.integrator == "rk4":
-            self.grid2 = Grid(n, d, None, policy)
-            self.tmp_pos = ti.ndarray(float, shape=(n, 2))
-            self.tmp_vel = ti.ndarray(float, shape=(n, 2))
+            self.grid2 = Grid(n, d, None, policy, dim)
+            self.tmp_pos = ti.ndarray(float, shape=(n, dim))
+            self.tmp_vel = ti.ndarray(float, shape=(n, dim))
             self.tmp_ids = ti.ndarray(ti.i32, shape=n)
             # RK4's stage state, rates and weighted sum of the rates (kernels/space/integrate.py)
-            self.rk4 = {k: ti.ndarray(float, shape=(n, 2)) for k in ("ys", "k", "yk")}
+            self.rk4 = {k: ti.ndarray(float, shape=(n, dim)) for k in ("ys", "k", "yk")}
         self.obs_out: tuple | None = None
-        self.cap = p.max_exact_candidates if p.integrator == "euler" else None
+        # The dense regime's coarse step is 2D: 3D Euler steps are always exact.
+        self.cap = p.max_exact_candidates if p.integrator == "euler" and dim == 2 else None
         self.fine: tuple[int, Grid] | None = None  # the dense regime's grid, by reach m
         self.agg: tuple | None = None
         self.coarse_steps, self.max_reach = 0, 1  # steps in the dense regime, largest m
@@ -210,17 +234,20 @@ class FormationKernel(ModelKernel):
                 free = next(j for j in range(2) if self.b_held[j] not in used)
                 self.b_dev[free].from_numpy(as_real(self.schedule.stored[k]))
                 self.b_held[free] = k
+        dim = self.dim
+        slots, lead = lead_slots(dim)
         for s, (t, w) in enumerate(zip(times, weights, strict=True)):
-            o = P.LEAD + LEAD.size * s
-            self.prm_host[o + LEAD.PX: o + LEAD.PY + 1] = self.path.position(t)
-            mats = [w.get(self.b_held[j], np.zeros((2, 2))) for j in range(2)]
-            self.prm_host[o + LEAD.A00: o + LEAD.A11 + 1] = mats[0].ravel()
-            self.prm_host[o + LEAD.B00: o + LEAD.B11 + 1] = mats[1].ravel()
+            o = slots.LEAD + lead.size * s
+            self.prm_host[o + lead.PX: o + lead.PX + dim] = self.path.position(t)
+            mats = [w.get(self.b_held[j], np.zeros((dim, dim))) for j in range(2)]
+            self.prm_host[o + lead.A00: o + lead.A00 + dim * dim] = mats[0].ravel()
+            self.prm_host[o + lead.B00: o + lead.B00 + dim * dim] = mats[1].ravel()
         self.prm.from_numpy(as_real(self.prm_host))
         return any(self.b_held[1] in w for w in weights)
 
     def _kernels(self, blend: bool):
-        return formation_kernels(self.fkind, self.gkind, self.f1, blend, self.inclusive)
+        return formation_kernels(self.fkind, self.gkind, self.f1, blend, self.inclusive,
+                                 self.dim)
 
     # --- stepping -------------------------------------------------------------------------
 
@@ -317,7 +344,7 @@ class FormationKernel(ModelKernel):
         blend = self._load_times([step * self.dt])
         _, _, observe = self._kernels(blend)
         if self.obs_out is None:
-            self.obs_out = (ti.ndarray(float, shape=(self.n, 2)),
+            self.obs_out = (ti.ndarray(float, shape=(self.n, self.dim)),
                             ti.ndarray(float, shape=(self.n, 3)))
         vel, aux = self.obs_out
         observe(st["pos"], st.ids, *self.b_dev, vel, aux, self.prm, *self.grid.view())
@@ -329,28 +356,29 @@ class FormationKernel(ModelKernel):
         arr = self._observe_arrays(step)
         pos, vel, aux, ids = arr["pos"], arr["vel"], arr["aux"], arr["ids"]
         p, q = self.path.position(t), self.path.velocity(t)
-        qn = float(np.hypot(*q))
-        speed = np.hypot(vel[:, 0], vel[:, 1])
+        qn = float(norms(q))
+        speed = norms(vel)
         c = pos.mean(axis=0)
         obs = {
             "leader_x": float(p[0]), "leader_y": float(p[1]), "leader_speed": qn,
             "centroid_x": float(c[0]), "centroid_y": float(c[1]),
-            "centroid_distance": float(np.hypot(*(c - p))),
+            "centroid_distance": float(norms(c - p)),
             "speed_min": float(speed.min()), "speed_mean": float(speed.mean()),
             "speed_max": float(speed.max()),
             "speed_error_max": float(np.abs(speed - qn).max()),
-            "velocity_mismatch_max": float(np.hypot(*(vel - q).T).max()),
+            "velocity_mismatch_max": float(norms(vel - q).max()),
             "min_distance": self._min_distance(pos, aux[:, 2]),
             "degree_mean": float(aux[:, 0].mean()),
         }
+        if self.dim == 3:
+            obs.update({"leader_z": float(p[2]), "centroid_z": float(c[2])})
         pair_part = 0.5 * float(aux[:, 1].sum())
         if self.f1:
             lag = lag_length(self.p, qn)
-            a = np.zeros(2) if qn == 0.0 else (lag / qn) * q
+            a = np.zeros(self.dim) if qn == 0.0 else (lag / qn) * q
             if self.p.lag_sign == "eq8":
                 a = -a
-            err = pos - (p + self.schedule.at(t)[ids] + a)
-            e = np.hypot(err[:, 0], err[:, 1])
+            e = norms(pos - (p + self.schedule.at(t)[ids] + a))
             obs.update({
                 "formation_error": float(e.mean()), "formation_error_max": float(e.max()),
                 "lag": float(lag),
@@ -358,8 +386,7 @@ class FormationKernel(ModelKernel):
             })
         else:
             rel = pos - p
-            obs["V2"] = float(attraction_energy(self.p, np.hypot(rel[:, 0], rel[:, 1])).sum()
-                              ) + pair_part
+            obs["V2"] = float(attraction_energy(self.p, norms(rel)).sum()) + pair_part
             obs.update(self._d_properties(rel, aux[:, 0], obs["min_distance"]))
         return obs
 
@@ -370,8 +397,7 @@ class FormationKernel(ModelKernel):
         if m < _NO_PAIR:
             return float(np.sqrt(m))
         if 2 <= self.n <= 4096:
-            diff = pos[:, None, :] - pos[None, :, :]
-            dist = np.hypot(diff[..., 0], diff[..., 1])
+            dist = norms(pos[:, None, :] - pos[None, :, :])
             np.fill_diagonal(dist, np.inf)
             return float(dist.min())
         return float(self.grid.gf[0])
@@ -382,12 +408,12 @@ class FormationKernel(ModelKernel):
         tol = self.p.leader_tolerance or self.d / 100.0
         collide = self.p.collision_distance or self.d / 100.0
         if self.graph is None:
-            self.graph = MetricGraph(self.n, self.d, self.inclusive, False)
+            self.graph = MetricGraph(self.n, self.d, self.inclusive, False, self.dim)
         st = self.state
         self.graph.union_edges(self.grid, st["pos"], st.ids)
         labels = roots(self.graph.parent.to_numpy())
         isolated = d2_isolated(degree, at_leader(rel, tol))
-        d3 = d3_holds(rel, labels, tol)
+        d3 = d3_holds(rel, labels, tol) if self.dim == 2 else d3_holds_3d(rel, labels, tol)
         return {
             "D1": float(min_dist >= collide),
             "D2": float(isolated == 0),

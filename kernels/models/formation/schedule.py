@@ -8,7 +8,8 @@ with s = s(u), u = (t - start)/(end - start), smoothstep 3u^2 - 2u^3 or linear; 
 every change b = the last completed B. Only the initial formation and the morph targets are
 stored: every B_c is R B for a stored B and a rotation R. Every stored formation has mean
 zero, so b(t) keeps mean zero (paper condition 1); a rotation keeps every pair distance
-(condition 2).
+(condition 2). In 3D the matrices are 3x3 and R(phi) turns about the change's axis
+(default z).
 """
 
 from __future__ import annotations
@@ -17,27 +18,36 @@ import numpy as np
 
 from flocklab.schemas.formation import FormationChange, FormationSpec
 
-from .shapes import offsets, rotation
+from .shapes import offsets, rotation, rotation3
 
-_I = np.eye(2)
+_Z_AXIS = (0.0, 0.0, 1.0)
 
 
 class OffsetSchedule:
-    def __init__(self, first: FormationSpec, changes: list[FormationChange], n: int, d: float):
+    def __init__(self, first: FormationSpec, changes: list[FormationChange], n: int, d: float,
+                 dim: int = 2):
         self.changes = changes
-        self.stored = [offsets(first, n, d)]
-        # B_c = in_force[c][1] @ stored[in_force[c][0]] (as 2x2 acting on each offset)
-        self.in_force: list[tuple[int, np.ndarray]] = [(0, _I)]
+        self.dim = dim
+        self._eye = np.eye(dim)
+        self.stored = [offsets(first, n, d, dim)]
+        # B_c = in_force[c][1] @ stored[in_force[c][0]] (as dim x dim acting on each offset)
+        self.in_force: list[tuple[int, np.ndarray]] = [(0, self._eye)]
         for c in changes:
             k, m = self.in_force[-1]
             if c.rotate is not None:
-                self.in_force.append((k, rotation(c.rotate) @ m))
+                self.in_force.append((k, self._rotation(c, c.rotate) @ m))
             else:
-                self.stored.append(offsets(c.formation, n, d))
-                self.in_force.append((len(self.stored) - 1, _I))
+                self.stored.append(offsets(c.formation, n, d, dim))
+                self.in_force.append((len(self.stored) - 1, self._eye))
+
+    def _rotation(self, change: FormationChange, angle: float) -> np.ndarray:
+        """The change's rotation by `angle`: in the plane, or about its axis in 3D."""
+        if self.dim == 2:
+            return rotation(angle)
+        return rotation3(angle, change.axis or _Z_AXIS)
 
     def weights(self, t: float) -> dict[int, np.ndarray]:
-        """{stored formation index: 2x2 matrix M} with b_i(t) = sum M stored[k][i]."""
+        """{stored formation index: dim x dim matrix M} with b_i(t) = sum M stored[k][i]."""
         done = 0
         for j, c in enumerate(self.changes):
             if t < c.start:
@@ -49,17 +59,21 @@ class OffsetSchedule:
             s = u * u * (3.0 - 2.0 * u) if c.relaxation == "smoothstep" else u
             k, m = self.in_force[j]
             if c.rotate is not None:
-                return {k: rotation(s * c.rotate) @ m}
+                return {k: self._rotation(c, s * c.rotate) @ m}
             target = self.in_force[j + 1][0]
-            return {k: (1.0 - s) * m, target: s * _I}
+            return {k: (1.0 - s) * m, target: s * self._eye}
         k, m = self.in_force[done]
         return {k: m}
 
     def at(self, t: float) -> np.ndarray:
-        """b_i(t), (N, 2) in agent-id order."""
+        """b_i(t), (N, dim) in agent-id order."""
         b = np.zeros_like(self.stored[0])
         for k, m in self.weights(t).items():
-            x, y = self.stored[k][:, 0], self.stored[k][:, 1]
-            b[:, 0] += m[0, 0] * x + m[0, 1] * y
-            b[:, 1] += m[1, 0] * x + m[1, 1] * y
+            cols = [self.stored[k][:, c] for c in range(self.dim)]
+            for r in range(self.dim):
+                # the terms summed left to right, as the 2D-only code wrote them out
+                row = m[r, 0] * cols[0]
+                for c in range(1, self.dim):
+                    row = row + m[r, c] * cols[c]
+                b[:, r] += row
         return b

@@ -11,6 +11,14 @@ Reference heading +x (`orientation` turns the whole shape counter-clockwise):
            N < k^2 the points nearest the apex are kept
   circle   N agents on a circle of radius d / (2 sin(pi/N)), adjacent ones d apart
   hex      the N points of the triangular lattice nearest the origin (ties broken by angle)
+3D only:
+  cube     a cubic lattice of spacing d, m = ceil(N^(1/3)) a side, filled x fastest, then y,
+           then z (N = m^3: the full cube; else the top layer partial)
+  shell    a Fibonacci sphere: z_k = 1 - (2k + 1)/N, azimuth k times the golden angle
+           (points spread evenly in area), centred, its radius set so that the nearest pair
+           is exactly d apart (so no two agents closer than d; not every agent has a
+           neighbour at exactly d, as no N-point sphere packing is regular in general)
+In 3D the plane shapes lie in the xy plane (z = 0), and `orientation` turns about z.
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from flocklab.schemas.formation import ExplicitFormation, FormationSpec, NamedFormation
 
@@ -76,30 +85,65 @@ def _hex(n: int) -> np.ndarray:
     return np.stack([x[order], y[order]], axis=1)
 
 
+def _cube(n: int) -> np.ndarray:
+    m = max(1, round(n ** (1.0 / 3.0)))
+    while m**3 < n:
+        m += 1
+    k = np.arange(n)
+    return np.stack([k % m, (k // m) % m, k // (m * m)], axis=1).astype(np.float64)
+
+
+def _shell(n: int) -> np.ndarray:
+    if n == 1:
+        return np.zeros((1, 3))
+    k = np.arange(n, dtype=np.float64)
+    z = 1.0 - (2.0 * k + 1.0) / n
+    rho = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    phi = k * (math.pi * (3.0 - math.sqrt(5.0)))  # the golden angle
+    b = np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
+    b -= b.mean(axis=0)
+    nearest, _ = cKDTree(b).query(b, k=2)
+    return b / nearest[:, 1].min()  # the nearest pair at distance 1
+
+
 _SHAPES = {
     "column": _column, "line": _line, "wedge": _wedge, "diamond": _diamond,
     "circle": _circle, "hex": _hex,
 }
+_SHAPES_3D = {"cube": _cube, "shell": _shell}
 
 
-def named_offsets(shape: str, n: int, d: float, orientation: float = 0.0) -> np.ndarray:
-    """(n, 2) offsets of a named formation with neighbour spacing d, mean zero."""
+def named_offsets(shape: str, n: int, d: float, orientation: float = 0.0,
+                  dim: int = 2) -> np.ndarray:
+    """(n, dim) offsets of a named formation with neighbour spacing d, mean zero."""
+    if shape in _SHAPES_3D:
+        b = _SHAPES_3D[shape](n) * d
+        b -= b.mean(axis=0)
+        return b @ rotation3(orientation, (0.0, 0.0, 1.0)).T if orientation else b
     b = _SHAPES[shape](n) * d
     b -= b.mean(axis=0)
     if orientation:
         b = b @ rotation(orientation).T
-    return b
+    return b if dim == 2 else np.concatenate([b, np.zeros((n, 1))], axis=1)
 
 
-def offsets(spec: FormationSpec, n: int, d: float) -> np.ndarray:
-    """The offsets a formation spec stands for, (n, 2) in agent-id order."""
+def offsets(spec: FormationSpec, n: int, d: float, dim: int = 2) -> np.ndarray:
+    """The offsets a formation spec stands for, (n, dim) in agent-id order."""
     if isinstance(spec, NamedFormation):
-        return named_offsets(spec.shape, n, d, spec.orientation)
+        return named_offsets(spec.shape, n, d, spec.orientation, dim)
     assert isinstance(spec, ExplicitFormation)
-    return np.asarray(spec.offsets, dtype=np.float64).reshape(n, 2)
+    return np.asarray(spec.offsets, dtype=np.float64).reshape(n, dim)
 
 
 def rotation(angle: float) -> np.ndarray:
     """The 2x2 counter-clockwise rotation by `angle` radians."""
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s], [s, c]])
+
+
+def rotation3(angle: float, axis: tuple[float, float, float]) -> np.ndarray:
+    """The 3x3 rotation by `angle` radians about `axis` (right-hand rule; Rodrigues)."""
+    u = np.asarray(axis, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    k = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
