@@ -78,9 +78,8 @@ def test_submit_follow_play_and_validation(browser, server, tmp_path):
     page.wait_for_function("() => document.querySelector('#job-id').textContent.length > 30")
     job_id = page.text_content("#job-id")
     page.wait_for_selector(f'#jobs tr[data-id="{job_id}"]')  # the job list shows it
-    progress, plot_while_running, deadline = [], [], time.monotonic() + 120
+    progress, deadline = [], time.monotonic() + 120
     while page.text_content("#job-status") != "succeeded":
-        plot_while_running.append(canvas_ink(page, "#plot"))
         assert time.monotonic() < deadline, page.text_content("#job-status")
         assert page.text_content("#job-status") not in ("failed", "cancelled", "timed_out")
         progress.append(float(page.get_attribute("#job-progress", "value") or 0))
@@ -89,9 +88,8 @@ def test_submit_follow_play_and_validation(browser, server, tmp_path):
     assert progress == sorted(progress) and progress[-1] == 1.0
     assert any(0 < p < 1 for p in progress), progress  # seen part-way, over SSE
 
-    # the observables arrive with the results, announced on the event stream: the plot
-    # is drawn then, without a click (the engine reports them at the end of a run)
-    assert max(plot_while_running) == 0
+    # the results, announced on the event stream, draw the final plot without a click
+    # (test_observables_plotted_while_the_job_runs: the plot before that)
     page.wait_for_function("""() => {
         const c = document.querySelector('#plot');
         const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
@@ -123,6 +121,55 @@ def test_submit_follow_play_and_validation(browser, server, tmp_path):
     row.locator(".field-error").filter(has_text=msg).wait_for()
     assert "invalid" in (row.get_attribute("class") or "")
     assert all("status of 422" in e for e in w.errors), w.errors
+    assert w.hosts == {"127.0.0.1"}, w.hosts
+
+
+def curve_pixels(page) -> int:
+    """Pixels of the observables plot in its curves' blue (#1565c0, antialiased)."""
+    return page.evaluate("""() => {
+        const c = document.querySelector('#plot');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let n = 0;
+        for (let i = 0; i < d.length; i += 4) {
+            if (d[i + 3] > 0 && d[i + 2] > 120 && d[i] < 120 && d[i + 2] - d[i] > 60) n++;
+        }
+        return n;
+    }""")
+
+
+def test_observables_plotted_while_the_job_runs(browser, server):
+    """A job of several seconds submitted from the page: its observables' curves are on
+    the plot while its status still says running (polled rows, before any result), and
+    the final plot replaces them once it has succeeded."""
+    w = Watched(browser, server.url + "/")
+    page = w.page
+    page.select_option("#preset", "vicsek-1995")
+    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
+    page.fill('#fields .field[data-path="time.steps"] input', "12000")
+    page.fill('#fields .field[data-path="recording.every"] input', "0")
+    page.click("#submit")
+    page.wait_for_function("() => document.querySelector('#job-status').textContent === "
+                           "'running'", timeout=60_000)
+    seen, deadline = [], time.monotonic() + 120
+    while True:
+        status_before = page.text_content("#job-status")
+        pixels = curve_pixels(page)
+        status_after = page.text_content("#job-status")
+        if status_before == status_after == "running":
+            seen.append(pixels)
+            if pixels > 50 and len([p for p in seen if p > 0]) >= 2:
+                break  # curves drawn, and drawn again as more rows came
+        assert status_after in ("queued", "running"), (status_after, seen)
+        assert time.monotonic() < deadline, seen
+        time.sleep(0.2)
+    assert "time 0" in page.text_content("#plot-legend")
+    page.wait_for_function("() => document.querySelector('#job-status').textContent === "
+                           "'succeeded'", timeout=120_000)
+    page.wait_for_selector("#downloads button >> nth=4", timeout=60_000)
+    page.wait_for_function("() => document.querySelector('#plot-legend').textContent"
+                           ".startsWith('time 0 … 1.200e+4')", timeout=60_000)
+    assert curve_pixels(page) > 50
+    assert not w.errors, w.errors
     assert w.hosts == {"127.0.0.1"}, w.hosts
 
 
