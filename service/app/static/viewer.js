@@ -670,9 +670,13 @@ function drawPlot(metrics, model) {
   const tmax = t.length ? t[t.length - 1] : 1;
   const conv = (metrics.summary && metrics.summary.convergence) || {};
   ctx.font = "11px sans-serif";
+  // Long series: at most about two points per pixel column (every k-th row).
+  const every = Math.max(1, Math.floor(t.length / (2 * c.width)));
   names.forEach((name, p) => {
-    const ys = obs[name].filter((v) => v !== null);
-    const lo = Math.min(...ys), hi = Math.max(...ys);
+    let lo = Infinity, hi = -Infinity;  // a loop: spreading 10^5 values overflows the stack
+    for (const v of obs[name]) {
+      if (v !== null) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+    }
     const top = p * panel + 14, h = panel - 24, left = 50, w = c.width - 60;
     ctx.strokeStyle = "#ccd";
     ctx.strokeRect(left, top, w, h);
@@ -683,7 +687,7 @@ function drawPlot(metrics, model) {
     ctx.strokeStyle = "#1565c0";
     ctx.beginPath();
     obs[name].forEach((v, i) => {
-      if (v === null) return;
+      if (v === null || (i % every && i !== t.length - 1)) return;
       const x = left + (t[i] / (tmax || 1)) * w;
       const y = top + h - (hi > lo ? (v - lo) / (hi - lo) : 0.5) * h;
       if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
