@@ -18,7 +18,7 @@ import numpy as np
 
 from flocklab.schemas import Scenario
 
-from .live import ObservationFeed, ObservationsFn
+from .live import OBSERVATIONS_INTERVAL, ObservationFeed, ObservationsFn
 from .result import FrameSink, RunResult
 
 WINDOW_AGENT_STEPS = 100_000  # the first window: a few ms to tens of ms of work
@@ -82,6 +82,7 @@ def run_batch(
     should_stop: Callable[[], bool] | None = None,
     progress_interval: float = 0.2,
     on_observations: ObservationsFn | None = None,
+    observations_interval: float = OBSERVATIONS_INTERVAL,
 ) -> list[RunResult]:
     """Run `scenarios` (one batch key) to the end, to cancellation or to blow-up.
     `on_observations` (a single scenario only) gets the rows the kernels have written so
@@ -113,7 +114,7 @@ def run_batch(
                 sink.frame(step, step * scenarios[b].time.dt, batch.frame(b, arrays[b]))
 
     # The batch's series are already the result's columns: nothing to filter.
-    feed = (ObservationFeed(on_observations, None)
+    feed = (ObservationFeed(on_observations, None, observations_interval)
             if on_observations is not None and len(scenarios) == 1 else None)
     record(0, None)
     s, cancelled, last_progress = 0, False, time.perf_counter()

@@ -15,7 +15,7 @@ import numpy as np
 from flocklab.schemas import Scenario
 
 from . import batch, runtime
-from .live import ObservationFeed, ObservationsFn
+from .live import OBSERVATIONS_INTERVAL, ObservationFeed, ObservationsFn
 from .model import ModelKernel, kernel_for
 from .result import FrameSink, RunResult, SimulationDiverged
 
@@ -32,6 +32,7 @@ def run(
     on_progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
     on_observations: ObservationsFn | None = None,
+    observations_interval: float = OBSERVATIONS_INTERVAL,
 ) -> RunResult:
     """Run `scenario` to the end, to cancellation, or to numerical blow-up.
 
@@ -39,14 +40,16 @@ def run(
     frames every `recording.every` steps and at the end. A blow-up returns status
     "diverged" with the step and likely cause; what was recorded before it is kept.
     `on_observations` gets the observation rows computed so far while the run goes on, in
-    batches (see kernels/live.py); the result's `observables` hold them all.
+    batches at most every `observations_interval` seconds (see kernels/live.py); the
+    result's `observables` hold them all.
     """
     rt = runtime.ensure(scenario.backend, scenario.threads, scenario.precision)
     make = fused_batch(scenario, rt.backend)
     if make is not None:
         return batch.run_batch(make, [scenario], backend=rt.backend, sinks=[sink],
                                on_progress=on_progress, should_stop=should_stop,
-                               on_observations=on_observations)[0]
+                               on_observations=on_observations,
+                               observations_interval=observations_interval)[0]
     t0 = time.perf_counter()
     model: ModelKernel = kernel_for(scenario.model.kind)(scenario, rt.policy)
     setup_seconds = time.perf_counter() - t0
@@ -58,7 +61,7 @@ def run(
     status, error, done = "completed", None, 0
     last_progress = last_poll = time.perf_counter()
     feed = (None if on_observations is None
-            else ObservationFeed(on_observations, rec.observables))
+            else ObservationFeed(on_observations, rec.observables, observations_interval))
 
     def observe(step: int) -> None:
         values = model.observe(step)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from flocklab import Client
-from flocklab.schemas import Scenario
+from flocklab.schemas import PRESETS, Scenario
 from flocklab.service.live_observables import LIVE_FILE, LiveObservables, complete_rows
 
 from .svc_helpers import assert_problem, scenario, submit, wait_for
@@ -27,29 +27,39 @@ def _scenario(steps: int, n: int = 100, dimension: int = 2, every: int = 10) -> 
     return Scenario.model_validate(spec)
 
 
+def _preset(name: str, steps: int) -> Scenario:
+    spec = PRESETS[name].build()
+    spec["time"]["steps"] = steps
+    spec["recording"]["every"] = 0
+    spec["threads"] = 1
+    return Scenario.model_validate(spec)
+
+
 @pytest.mark.parametrize("path, sc", [
-    ("fused", _scenario(30_000)),  # 2D, N <= 10^4: the fused small-N kernels
-    ("per_step", _scenario(300, dimension=3, every=1)),  # 3D takes the per-step path
-])
+    ("fused", _scenario(20_000)),  # 2D, N <= 10^4: the fused small-N kernels
+    # the flocking kernels' rows, lambda2 (computed per window on the host) among them
+    ("fused", _preset("tjp-switching", 40_000)),
+    ("per_step", _scenario(100, dimension=3, every=1)),  # 3D takes the per-step path
+], ids=["vicsek-fused", "flocking-fused", "vicsek-3d-per-step"])
 def test_rows_handed_over_are_a_prefix_and_change_no_bit(path, sc):
     from flocklab import kernels
 
     alone = kernels.run(sc)
     got: list[dict[str, np.ndarray]] = []
-    live = kernels.run(sc, on_observations=got.append)
+    # interval 0: rows at every progress point (per step) or window end (fused), so even
+    # a short run hands some over
+    live = kernels.run(sc, on_observations=got.append, observations_interval=0.0)
     assert live.extra["engine_path"] == path
     assert list(live.observables) == list(alone.observables)
     for k, v in alone.observables.items():
         assert np.array_equal(live.observables[k], v, equal_nan=True), k
-    assert got, "a run of over a second hands rows over while it runs"
+    assert got, "no rows handed over while the run went on"
     assert all(list(g) == list(live.observables) for g in got)  # the final columns
     joined = {k: np.concatenate([g[k] for g in got]) for k in got[0]}
     n = len(joined["step"])
     assert 0 < n <= len(live.observables["step"])
     for k, v in joined.items():
         assert np.array_equal(v, live.observables[k][:n], equal_nan=True), k
-    # batched: far fewer hand-overs than rows
-    assert len(got) < n
 
 
 def test_live_file_never_shows_half_a_row(tmp_path):
