@@ -171,3 +171,8 @@ def test_observables_route_errors(server, http):
     assert_problem(http.get(f"/v1/jobs/{job['id']}/observables", params={"limit": 0}),
                    422, "query.limit")
     assert_problem(httpx.get(f"{server.url}/v1/jobs/not-a-uuid/observables"), 422)
+    # a finished job whose observables.csv went missing from its results: 500, not rows
+    assert wait_for(http, job["id"])["status"] == "succeeded"
+    (Path(server.data_dir) / "results" / job["id"] / "observables.csv").unlink()
+    body = assert_problem(http.get(f"/v1/jobs/{job['id']}/observables"), 500)
+    assert body["type"].endswith(":results-corrupted")

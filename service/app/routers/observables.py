@@ -60,6 +60,8 @@ def observables(
         try:
             columns, more = read_rows(path, start, limit)
         except FileNotFoundError:
+            if job.terminal:  # the committed results lack it
+                raise corrupted("observables.csv") from None
             job = get_job(runtime, job_id)
             continue
         except (OSError, CorruptObservables):
