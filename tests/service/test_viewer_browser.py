@@ -68,12 +68,23 @@ def canvas_ink(page, selector: str = "#canvas") -> float:
     }""", selector)
 
 
+def preset_form(page, name: str, fields: dict[str, str]) -> None:
+    """Choose a preset and fill form fields once the form has settled: choosing a preset
+    rebuilds the form after fetching its model's schema, which replaced fields filled too
+    early (a job then ran with the preset's own values)."""
+    page.select_option("#preset", name)
+    page.wait_for_load_state("networkidle")
+    for path, value in fields.items():
+        page.fill(f'#fields .field[data-path="{path}"] input', value)
+    for path, value in fields.items():
+        got = page.input_value(f'#fields .field[data-path="{path}"] input')
+        assert got == value, (path, got)
+
+
 def test_submit_follow_play_and_validation(browser, server, tmp_path):
     w = Watched(browser, server.url + "/")
     page = w.page
-    page.select_option("#preset", "vicsek-1995")
-    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
-    page.fill('#fields .field[data-path="time.steps"] input', "3000")
+    preset_form(page, "vicsek-1995", {"time.steps": "3000"})
     page.click("#submit")
     page.wait_for_function("() => document.querySelector('#job-id').textContent.length > 30")
     job_id = page.text_content("#job-id")
@@ -143,11 +154,9 @@ def test_observables_plotted_while_the_job_runs(browser, server):
     arrive; cancelled then, its results draw the final plot over the rows it kept."""
     w = Watched(browser, server.url + "/")
     page = w.page
-    page.select_option("#preset", "vicsek-1995")
-    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
-    page.fill('#fields .field[data-path="time.steps"] input', "200000")  # minutes
-    page.fill('#fields .field[data-path="recording.every"] input', "0")
-    page.fill('#fields .field[data-path="recording.observables_every"] input', "10")
+    preset_form(page, "vicsek-1995", {"time.steps": "200000",  # minutes
+                                      "recording.every": "0",
+                                      "recording.observables_every": "10"})
     page.click("#submit")
     page.wait_for_function("() => document.querySelector('#job-status').textContent === "
                            "'running'", timeout=60_000)
@@ -224,9 +233,7 @@ def test_sweep_list_follows_a_sweep_submitted_from_the_page(browser, server):
     from 0 to 6: only its order is asserted."""
     w = Watched(browser, server.url + "/")
     page = w.page
-    page.select_option("#preset", "vicsek-1995")
-    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
-    page.fill('#fields .field[data-path="time.steps"] input', "800")
+    preset_form(page, "vicsek-1995", {"time.steps": "800"})
     page.select_option("#sweep-axis", "model.eta")
     page.fill("#sweep-values", "0.5, 2, 4")
     page.fill("#sweep-replicas", "2")
@@ -289,10 +296,8 @@ def test_api_docs_render_offline(browser, server, path, rendered):
 def test_cancel_from_the_page(browser, server):
     w = Watched(browser, server.url + "/")
     page = w.page
-    page.select_option("#preset", "vicsek-1995")
-    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
-    page.fill('#fields .field[data-path="time.steps"] input', "200000")
-    page.fill('#fields .field[data-path="recording.every"] input', "0")  # within the limits
+    preset_form(page, "vicsek-1995", {"time.steps": "200000",
+                                      "recording.every": "0"})  # within the limits
     page.click("#submit")
     page.wait_for_function("() => document.querySelector('#job-status').textContent === "
                            "'running'", timeout=60_000)
