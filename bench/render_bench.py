@@ -8,9 +8,11 @@ Each case first runs a small Vicsek scenario into a temporary folder (not timed)
 times `flocklab render` REPEAT times each way: the whole command in a fresh process, as
 the `flocklab` console script runs it (`service.entry`; `cli_seconds` wall and
 `cli_cpu_seconds` user + system, including Python, matplotlib and h5py start-up), and the
-drawing and writing alone inside this process (`render_seconds`). Medians are printed,
-with the load average around the case: on a shared machine the wall time follows the
-load, the CPU time much less.
+drawing and writing alone inside this process (`render_seconds`). `imports_cpu_seconds`
+is the CPU time of a fresh interpreter that only imports what the command draws with
+(numpy, h5py, and matplotlib as `service.render.figure` imports it). Medians are
+printed, with the load average around the case: on a shared machine the wall time follows
+the load, the CPU time much less.
 
     python bench/render_bench.py [--keep DIR] [--repeat R] [--only CASE]
 """
@@ -51,6 +53,11 @@ CASES = [
 ]
 
 
+# What the render command imports before it draws, in a fresh interpreter.
+IMPORTS = ("import numpy, h5py; from flocklab.service.render.figure import new_figure; "
+           "new_figure(64, 64)")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--keep", type=Path, help="keep the runs and pictures in this folder")
@@ -85,11 +92,17 @@ def main() -> None:
             t0 = time.perf_counter()
             drawn = render(parser.parse_args(argv))
             inners.append(time.perf_counter() - t0)
+        imports = []
+        for _ in range(args.repeat):
+            used = _children_cpu()
+            subprocess.run([sys.executable, "-c", IMPORTS], check=True, capture_output=True)
+            imports.append(_children_cpu() - used)
         cli = statistics.median(walls)
         print(json.dumps({"case": name, "N": sc.n_agents, "repeat": args.repeat,
                           "cli_seconds": round(cli, 2),
                           "cli_cpu_seconds": round(statistics.median(cpus), 2),
                           "render_seconds": round(statistics.median(inners), 2),
+                          "imports_cpu_seconds": round(statistics.median(imports), 2),
                           "cli_seconds_all": [round(t, 2) for t in walls],
                           "bar_seconds": bar, "within_bar": cli < bar,
                           "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],

@@ -145,6 +145,18 @@ def metrics(body: dict[str, Any]) -> dict[str, Any]:
     return {"summary": body["summary"], "observables": obs}
 
 
+def observable_pages(pages: list[dict[str, Any]]) -> dict[str, Any]:
+    """`GET …/observables` answers, paged with `start`, as one: each column a float array
+    (missing values NaN); `partial` and `status` as the last page says."""
+    names: list[str] = []
+    for page in pages:
+        names += [n for n in page["observables"] if n not in names]
+    obs = {n: np.array([np.nan if v is None else v for page in pages
+                        for v in page["observables"].get(n, [])], dtype=float) for n in names}
+    return {"partial": pages[-1]["partial"], "status": pages[-1]["status"],
+            "observables": obs}
+
+
 class JobState:
     """The fields of a job, shared by `Job` and `AsyncJob`."""
 

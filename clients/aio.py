@@ -185,6 +185,16 @@ class AsyncJob(_core.JobState):
         r = await self.client.request("GET", f"/v1/jobs/{self.id}/metrics")
         return _core.metrics(r.json())
 
+    async def observables(self, start: int = 0) -> dict[str, Any]:
+        """As `Job.observables`: the rows so far while the job runs, all once it ended."""
+        pages: list[dict[str, Any]] = []
+        while not pages or pages[-1]["more"]:
+            r = await self.client.request("GET", f"/v1/jobs/{self.id}/observables",
+                                          params={"start": start})
+            pages.append(r.json())
+            start += pages[-1]["rows"]
+        return _core.observable_pages(pages)
+
     async def trajectory(self, start: int | None = None, stop: int | None = None,
                          stride: int = 1, agents: slice | Sequence[int] | str | None = None,
                          arrays: Sequence[str] | str | None = None) -> dict[str, np.ndarray]:

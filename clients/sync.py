@@ -210,6 +210,17 @@ class Job(_core.JobState):
         """{"summary": dict, "observables": {name: float array}}."""
         return _core.metrics(self.client.request("GET", f"/v1/jobs/{self.id}/metrics").json())
 
+    def observables(self, start: int = 0) -> dict[str, Any]:
+        """The observables from row `start` on, also while the job runs: {"partial":
+        true until the job has ended (more rows may come), "status", "observables": {name:
+        float array}}; once it has ended, the final series (what `metrics()` holds)."""
+        pages: list[dict[str, Any]] = []
+        while not pages or pages[-1]["more"]:
+            pages.append(self.client.request("GET", f"/v1/jobs/{self.id}/observables",
+                                             params={"start": start}).json())
+            start += pages[-1]["rows"]
+        return _core.observable_pages(pages)
+
     def trajectory(self, start: int | None = None, stop: int | None = None, stride: int = 1,
                    agents: slice | Sequence[int] | str | None = None,
                    arrays: Sequence[str] | str | None = None) -> dict[str, np.ndarray]:

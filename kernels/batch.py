@@ -18,6 +18,7 @@ import numpy as np
 
 from flocklab.schemas import Scenario
 
+from .live import OBSERVATIONS_INTERVAL, ObservationFeed, ObservationsFn
 from .result import FrameSink, RunResult
 
 WINDOW_AGENT_STEPS = 100_000  # the first window: a few ms to tens of ms of work
@@ -81,8 +82,12 @@ def run_batch(
     on_progress: Callable[[int, int], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
     progress_interval: float = 0.2,
+    on_observations: ObservationsFn | None = None,
+    observations_interval: float = OBSERVATIONS_INTERVAL,
 ) -> list[RunResult]:
-    """Run `scenarios` (one batch key) to the end, to cancellation or to blow-up."""
+    """Run `scenarios` (one batch key) to the end, to cancellation or to blow-up.
+    `on_observations` (a single scenario only) gets the rows the kernels have written so
+    far, at window ends, batched as kernels/live.py says."""
     from .engine import time_to_converge
 
     t0 = time.perf_counter()
@@ -109,6 +114,9 @@ def run_batch(
             if due and (status is None or batch.divergence(b, status) is None):
                 sink.frame(step, step * scenarios[b].time.dt, batch.frame(b, arrays[b]))
 
+    # The batch's series are already the result's columns: nothing to filter.
+    feed = (ObservationFeed(on_observations, None, observations_interval)
+            if on_observations is not None and len(scenarios) == 1 else None)
     record(0, None)
     s, cancelled, last_progress = 0, False, time.perf_counter()
     while s <= last:
@@ -130,6 +138,8 @@ def run_batch(
         if on_progress is not None and now - last_progress >= progress_interval:
             last_progress = now
             on_progress(min(s, last), last)
+        if feed is not None and feed.due(now):
+            feed.send(_series(batch, 0, batch.status(), scenarios[0]), now)
         if should_stop is not None and should_stop():
             cancelled = True
             batch.end_at(s)
@@ -141,11 +151,7 @@ def run_batch(
     wall = time.perf_counter() - t0
     results = []
     for b, sc in enumerate(scenarios):
-        # float64 like the per-step path's series, whatever the kernels' precision.
-        obs = {k: np.asarray(v, dtype=np.float64) for k, v in
-               batch.observables(b, status).items()}
-        obs = {"step": obs["step"], "time": obs["step"] * sc.time.dt,
-               **{k: v for k, v in obs.items() if k != "step"}}
+        obs = _series(batch, b, status, sc)
         div = batch.divergence(b, status)
         done = min(s, steps[b]) if div is None else div[0]
         error = None
@@ -171,3 +177,11 @@ def run_batch(
     if on_progress is not None and len(scenarios) == 1:
         on_progress(results[0].steps, steps[0])
     return results
+
+
+def _series(batch: Batch, b: int, status: np.ndarray, sc: Scenario) -> dict[str, np.ndarray]:
+    """Replica b's observables so far: float64 like the per-step path's series, whatever
+    the kernels' precision, with `time` after `step`."""
+    obs = {k: np.asarray(v, dtype=np.float64) for k, v in batch.observables(b, status).items()}
+    return {"step": obs["step"], "time": obs["step"] * sc.time.dt,
+            **{k: v for k, v in obs.items() if k != "step"}}

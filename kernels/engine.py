@@ -15,6 +15,7 @@ import numpy as np
 from flocklab.schemas import Scenario
 
 from . import batch, runtime
+from .live import OBSERVATIONS_INTERVAL, ObservationFeed, ObservationsFn
 from .model import ModelKernel, kernel_for
 from .result import FrameSink, RunResult, SimulationDiverged
 
@@ -30,18 +31,25 @@ def run(
     sink: FrameSink | None = None,
     on_progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
+    on_observations: ObservationsFn | None = None,
+    observations_interval: float = OBSERVATIONS_INTERVAL,
 ) -> RunResult:
     """Run `scenario` to the end, to cancellation, or to numerical blow-up.
 
     Observables are evaluated every `recording.observables_every` steps and at the end;
     frames every `recording.every` steps and at the end. A blow-up returns status
     "diverged" with the step and likely cause; what was recorded before it is kept.
+    `on_observations` gets the observation rows computed so far while the run goes on, in
+    batches at most every `observations_interval` seconds (see kernels/live.py); the
+    result's `observables` hold them all.
     """
     rt = runtime.ensure(scenario.backend, scenario.threads, scenario.precision)
     make = fused_batch(scenario, rt.backend)
     if make is not None:
         return batch.run_batch(make, [scenario], backend=rt.backend, sinks=[sink],
-                               on_progress=on_progress, should_stop=should_stop)[0]
+                               on_progress=on_progress, should_stop=should_stop,
+                               on_observations=on_observations,
+                               observations_interval=observations_interval)[0]
     t0 = time.perf_counter()
     model: ModelKernel = kernel_for(scenario.model.kind)(scenario, rt.policy)
     setup_seconds = time.perf_counter() - t0
@@ -53,6 +61,8 @@ def run(
     series: dict[str, list[float]] = {"step": [], "time": []}
     status, error, done = "completed", None, 0
     last_progress = last_poll = time.perf_counter()
+    feed = (None if on_observations is None
+            else ObservationFeed(on_observations, rec.observables, observations_interval))
 
     def observe(step: int) -> None:
         values = model.observe(step)
@@ -85,6 +95,8 @@ def run(
             if on_progress is not None and now - last_progress >= PROGRESS_INTERVAL:
                 last_progress = now
                 on_progress(done, steps)
+            if feed is not None and feed.due(now):
+                feed.send(series, now)
         # The final state, observed (its grid build may still find a runaway) and recorded.
         if not series["step"] or series["step"][-1] != done:
             observe(done)

@@ -10,6 +10,9 @@ end, so the target is either complete or absent; a run that blows up still lands
 status "diverged" and the frames recorded before the blow-up, and so does a run stopped
 through `should_stop` (status "cancelled", or the caller's `stopped_status`: the CLI's
 Ctrl-C gives "interrupted"), with the frames and observables up to the stop.
+While the run goes on, the observation rows computed so far are published in the hidden
+folder's `observables.partial.csv` (service/live_observables.py; deleted once the final
+observables.csv is written), which the service reads for a running job.
 """
 
 from __future__ import annotations
@@ -67,6 +70,7 @@ def execute_to_dir(
     from flocklab import kernels  # the engine: only where a simulation runs
 
     from .h5md import H5MDWriter
+    from .live_observables import LIVE_FILE, LiveObservables
 
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite and any(out_dir.iterdir()):
@@ -77,14 +81,17 @@ def execute_to_dir(
     try:
         (tmp / "scenario.json").write_text(scenario.model_dump_json(indent=2))
         writer = H5MDWriter(tmp / "trajectory.h5", scenario)
+        live = LiveObservables(tmp / LIVE_FILE)
         try:
             result = kernels.run(
-                scenario, sink=writer, on_progress=on_progress, should_stop=should_stop
+                scenario, sink=writer, on_progress=on_progress, should_stop=should_stop,
+                on_observations=live.append,
             )
             writer.write_observables(result.observables)
         finally:
             writer.close()
         write_observables_csv(tmp / "observables.csv", result.observables)
+        live.remove()
         summary = run_summary(scenario, result, frames=writer.frames, files=list(ARTIFACTS))
         if summary["status"] == "cancelled":
             summary["status"] = stopped_status

@@ -24,7 +24,7 @@ from .auth import require_api_key
 from .body_limit import BodyLimitMiddleware
 from .events import ChangeHub
 from .problems import PROBLEM_MEDIA_TYPE, UnexpectedErrorMiddleware, install_problem_handlers
-from .routers import catalog, health, jobs, render, results, sweeps
+from .routers import catalog, health, jobs, observables, render, results, sweeps
 from .settings import Settings, load_settings
 from .sweep_wire import SweepRequest
 from .viewer import install as install_viewer
@@ -84,7 +84,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(UnexpectedErrorMiddleware)  # outermost: catches every layer's error
     app.include_router(health.router)
     auth = [Depends(require_api_key)]
-    for module in (jobs, results, render, sweeps, catalog):
+    for module in (jobs, results, observables, render, sweeps, catalog):
         app.include_router(module.router, prefix="/v1", dependencies=auth)
     app.include_router(render.sweep_router, prefix="/v1", dependencies=auth)
     install_viewer(app)  # the browser viewer at / and offline Swagger UI assets

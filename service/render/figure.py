@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import PlottingUnavailable, RenderInputError
+from .mpl_import import import_for_drawing
 
 DPI = 100
 FORMATS = {".png": "png", ".svg": "svg", ".pdf": "pdf"}
@@ -16,6 +17,7 @@ MIN_SIZE, MAX_SIZE = 64, 4096
 def new_figure(width: int, height: int) -> Any:
     """A figure of width x height pixels on the Agg canvas (no display, thread-safe)."""
     try:
+        import_for_drawing()
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
     except ImportError as exc:
@@ -40,14 +42,30 @@ def image_format(path: Path) -> str:
     return fmt
 
 
-# zlib level 3 instead of Pillow's 6: half the encoding time of an 800 x 800 snapshot
-# (a sixth of its drawing), and no larger a file (PNG's filters do most of the work).
-PNG_OPTIONS = {"pil_kwargs": {"compress_level": 3}}
+# zlib level 1 instead of Pillow's 6, of RGB rather than matplotlib's RGBA (the figures are
+# opaque): 0.027 s instead of 0.068 s of CPU for an 800 x 800 snapshot (level 3 RGBA, the
+# earlier choice: 0.045 s), and a smaller file than either (415 kB against 443 and 499 kB
+# for a 10^3-agent frame with its edges): PNG's filters do most of the work.
+PNG_COMPRESS_LEVEL = 1
 
 
 def save(fig: Any, out: Path | None, fmt: str = "png") -> bytes | None:
     """Write the figure to `out` (its suffix picks the format) or return its bytes."""
     target: Any = io.BytesIO() if out is None else out
     fmt = fmt if out is None else image_format(out)
-    fig.savefig(target, format=fmt, dpi=DPI, **(PNG_OPTIONS if fmt == "png" else {}))
+    if fmt == "png":
+        _save_png(fig, target)
+    else:
+        fig.savefig(target, format=fmt, dpi=DPI)
     return target.getvalue() if out is None else None
+
+
+def _save_png(fig: Any, target: Any) -> None:
+    """The figure drawn on its Agg canvas, encoded by Pillow (matplotlib's dependency)."""
+    import numpy as np
+    from PIL import Image
+
+    fig.canvas.draw()
+    rgb = np.asarray(fig.canvas.buffer_rgba())[:, :, :3]
+    Image.fromarray(np.ascontiguousarray(rgb)).save(
+        target, format="png", compress_level=PNG_COMPRESS_LEVEL, dpi=(DPI, DPI))

@@ -157,6 +157,7 @@ class Scene:
 
     def _build(self, obst: geometry.Obstacles | None) -> None:
         from matplotlib.collections import LineCollection
+        from matplotlib.ticker import MaxNLocator
 
         fig, run, a = self.fig, self.run, self.artists
         fig.clear()
@@ -205,6 +206,10 @@ class Scene:
                                    zorder=5))
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
+        # At most 6 labelled ticks an axis (matplotlib's default draws up to 9 here): the
+        # tick labels' layout was a fifth of a 10^3-agent snapshot's drawing.
+        ax.xaxis.set_major_locator(MaxNLocator(5))
+        ax.yaxis.set_major_locator(MaxNLocator(5))
         ax.set_aspect("equal", adjustable="box")
         ax.set_xlabel("x")
         ax.set_ylabel("y")

@@ -68,19 +68,29 @@ def canvas_ink(page, selector: str = "#canvas") -> float:
     }""", selector)
 
 
+def preset_form(page, name: str, fields: dict[str, str]) -> None:
+    """Choose a preset and fill form fields once the form has settled: choosing a preset
+    rebuilds the form after fetching its model's schema, which replaced fields filled too
+    early (a job then ran with the preset's own values)."""
+    page.select_option("#preset", name)
+    page.wait_for_load_state("networkidle")
+    for path, value in fields.items():
+        page.fill(f'#fields .field[data-path="{path}"] input', value)
+    for path, value in fields.items():
+        got = page.input_value(f'#fields .field[data-path="{path}"] input')
+        assert got == value, (path, got)
+
+
 def test_submit_follow_play_and_validation(browser, server, tmp_path):
     w = Watched(browser, server.url + "/")
     page = w.page
-    page.select_option("#preset", "vicsek-1995")
-    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
-    page.fill('#fields .field[data-path="time.steps"] input', "3000")
+    preset_form(page, "vicsek-1995", {"time.steps": "3000"})
     page.click("#submit")
     page.wait_for_function("() => document.querySelector('#job-id').textContent.length > 30")
     job_id = page.text_content("#job-id")
     page.wait_for_selector(f'#jobs tr[data-id="{job_id}"]')  # the job list shows it
-    progress, plot_while_running, deadline = [], [], time.monotonic() + 120
+    progress, deadline = [], time.monotonic() + 120
     while page.text_content("#job-status") != "succeeded":
-        plot_while_running.append(canvas_ink(page, "#plot"))
         assert time.monotonic() < deadline, page.text_content("#job-status")
         assert page.text_content("#job-status") not in ("failed", "cancelled", "timed_out")
         progress.append(float(page.get_attribute("#job-progress", "value") or 0))
@@ -89,9 +99,8 @@ def test_submit_follow_play_and_validation(browser, server, tmp_path):
     assert progress == sorted(progress) and progress[-1] == 1.0
     assert any(0 < p < 1 for p in progress), progress  # seen part-way, over SSE
 
-    # the observables arrive with the results, announced on the event stream: the plot
-    # is drawn then, without a click (the engine reports them at the end of a run)
-    assert max(plot_while_running) == 0
+    # the results, announced on the event stream, draw the final plot without a click
+    # (test_observables_plotted_while_the_job_runs: the plot before that)
     page.wait_for_function("""() => {
         const c = document.querySelector('#plot');
         const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
@@ -123,6 +132,55 @@ def test_submit_follow_play_and_validation(browser, server, tmp_path):
     row.locator(".field-error").filter(has_text=msg).wait_for()
     assert "invalid" in (row.get_attribute("class") or "")
     assert all("status of 422" in e for e in w.errors), w.errors
+    assert w.hosts == {"127.0.0.1"}, w.hosts
+
+
+def curve_pixels(page) -> int:
+    """Pixels of the observables plot in its curves' blue (#1565c0, antialiased)."""
+    return page.evaluate("""() => {
+        const c = document.querySelector('#plot');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let n = 0;
+        for (let i = 0; i < d.length; i += 4) {
+            if (d[i + 3] > 0 && d[i + 2] > 120 && d[i] < 120 && d[i + 2] - d[i] > 60) n++;
+        }
+        return n;
+    }""")
+
+
+def test_observables_plotted_while_the_job_runs(browser, server):
+    """A long job submitted from the page: its observables' curves are on the plot while
+    its status still says running (polled rows, before any result), drawn again as rows
+    arrive; cancelled then, its results draw the final plot over the rows it kept."""
+    w = Watched(browser, server.url + "/")
+    page = w.page
+    preset_form(page, "vicsek-1995", {"time.steps": "200000",  # minutes
+                                      "recording.every": "0",
+                                      "recording.observables_every": "10"})
+    page.click("#submit")
+    page.wait_for_function("() => document.querySelector('#job-status').textContent === "
+                           "'running'", timeout=60_000)
+    seen, legends, deadline = [], set(), time.monotonic() + 120
+    while True:
+        status_before = page.text_content("#job-status")
+        pixels = curve_pixels(page)
+        legend = page.text_content("#plot-legend")
+        status_after = page.text_content("#job-status")
+        assert status_after == "running", (status_after, seen)
+        if status_before == status_after == "running" and pixels:
+            seen.append(pixels)
+            legends.add(legend)
+            if pixels > 50 and len(legends) >= 2:
+                break  # curves drawn, and drawn again over a longer time as rows came
+        assert time.monotonic() < deadline, seen
+        time.sleep(0.2)
+    assert all(lg.startswith("time 0 … ") for lg in legends), legends
+    page.click("#cancel")
+    page.wait_for_function("() => document.querySelector('#job-status').textContent === "
+                           "'cancelled'", timeout=60_000)
+    page.wait_for_selector("#downloads button >> nth=4", timeout=60_000)  # the results
+    assert curve_pixels(page) > 50
+    assert not w.errors, w.errors
     assert w.hosts == {"127.0.0.1"}, w.hosts
 
 
@@ -175,9 +233,7 @@ def test_sweep_list_follows_a_sweep_submitted_from_the_page(browser, server):
     from 0 to 6: only its order is asserted."""
     w = Watched(browser, server.url + "/")
     page = w.page
-    page.select_option("#preset", "vicsek-1995")
-    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
-    page.fill('#fields .field[data-path="time.steps"] input', "800")
+    preset_form(page, "vicsek-1995", {"time.steps": "800"})
     page.select_option("#sweep-axis", "model.eta")
     page.fill("#sweep-values", "0.5, 2, 4")
     page.fill("#sweep-replicas", "2")
@@ -240,10 +296,8 @@ def test_api_docs_render_offline(browser, server, path, rendered):
 def test_cancel_from_the_page(browser, server):
     w = Watched(browser, server.url + "/")
     page = w.page
-    page.select_option("#preset", "vicsek-1995")
-    page.wait_for_selector('#fields .field[data-path="time.steps"] input')
-    page.fill('#fields .field[data-path="time.steps"] input', "200000")
-    page.fill('#fields .field[data-path="recording.every"] input', "0")  # within the limits
+    preset_form(page, "vicsek-1995", {"time.steps": "200000",
+                                      "recording.every": "0"})  # within the limits
     page.click("#submit")
     page.wait_for_function("() => document.querySelector('#job-status').textContent === "
                            "'running'", timeout=60_000)

@@ -313,8 +313,9 @@ function showJob(job) {
   }
 }
 
-/** Follow one job or sweep in the panel: its events until it ends, then its results. */
-async function follow(kind, id, { plotTitle, frames, show, load }) {
+/** Follow one job or sweep in the panel: its events until it ends, then its results;
+ *  `live` (jobs) plots what arrives while it runs, until the results take over. */
+async function follow(kind, id, { plotTitle, frames, show, load, live }) {
   if (state.follow) state.follow.abort();
   stopPlayer();
   state.selected = kind === "job" ? id : null;
@@ -327,22 +328,30 @@ async function follow(kind, id, { plotTitle, frames, show, load }) {
   clearPlot();
   const ctl = new AbortController();
   state.follow = ctl;
+  const liveCtl = new AbortController();
+  ctl.signal.addEventListener("abort", () => liveCtl.abort());
   let last = null;
   try {
     await readEvents(`/v1/${kind}s/${id}/events`, ctl.signal, (event, data) => {
-      if (event === kind) { last = JSON.parse(data); show(last); }
+      if (event !== kind) return;
+      const first = last === null;
+      last = JSON.parse(data);
+      show(last);
+      if (first && live && !TERMINAL.includes(last.status)) live(last, liveCtl.signal);
     });
   } catch (err) {
     if (ctl.signal.aborted) return;
     $("job-error").textContent = err.message;
     return;
+  } finally {
+    liveCtl.abort();  // the results (or nothing) replace the live plot
   }
   if (!ctl.signal.aborted && last && last.results === "available") await load(last);
 }
 
 function selectJob(id) {
   return follow("job", id, { plotTitle: "Observables", frames: true, show: showJob,
-                             load: loadResults });
+                             load: loadResults, live: followObservables });
 }
 
 async function readEvents(path, signal, onEvent) {
@@ -611,6 +620,38 @@ function measurePlayback(count) {
 
 // -- observables --------------------------------------------------------------------------
 
+const LIVE_POLL_MS = 1000;  // between asks for a running job's new observation rows
+
+/** Plot a running job's observables as they arrive: ask for the rows after those held
+ *  (`start`), append, redraw; until `signal` aborts (the job ended: its results draw the
+ *  final plot) or the service says the series is final. */
+async function followObservables(job, signal) {
+  const held = {};
+  let rows = 0;
+  while (!signal.aborted) {
+    let body = null;
+    try {
+      body = await api(`/v1/jobs/${job.id}/observables?start=${rows}`, { signal });
+    } catch (err) {
+      if (signal.aborted) return;  // a failed ask is retried at the next poll
+    }
+    if (body && !signal.aborted) {
+      for (const [name, values] of Object.entries(body.observables)) {
+        const col = held[name] || (held[name] = []);
+        for (const v of values) col.push(v);
+      }
+      rows += body.rows;
+      if (body.rows) drawPlot({ observables: held, summary: {} }, job.model);
+      if (!body.partial) return;
+      if (body.more) continue;
+    }
+    await new Promise((resolve) => {
+      const t = setTimeout(resolve, LIVE_POLL_MS);
+      signal.addEventListener("abort", () => { clearTimeout(t); resolve(); }, { once: true });
+    });
+  }
+}
+
 function clearPlot() {
   const c = $("plot");
   c.getContext("2d").clearRect(0, 0, c.width, c.height);
@@ -629,9 +670,13 @@ function drawPlot(metrics, model) {
   const tmax = t.length ? t[t.length - 1] : 1;
   const conv = (metrics.summary && metrics.summary.convergence) || {};
   ctx.font = "11px sans-serif";
+  // Long series: at most about two points per pixel column (every k-th row).
+  const every = Math.max(1, Math.floor(t.length / (2 * c.width)));
   names.forEach((name, p) => {
-    const ys = obs[name].filter((v) => v !== null);
-    const lo = Math.min(...ys), hi = Math.max(...ys);
+    let lo = Infinity, hi = -Infinity;  // a loop: spreading 10^5 values overflows the stack
+    for (const v of obs[name]) {
+      if (v !== null) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+    }
     const top = p * panel + 14, h = panel - 24, left = 50, w = c.width - 60;
     ctx.strokeStyle = "#ccd";
     ctx.strokeRect(left, top, w, h);
@@ -642,7 +687,7 @@ function drawPlot(metrics, model) {
     ctx.strokeStyle = "#1565c0";
     ctx.beginPath();
     obs[name].forEach((v, i) => {
-      if (v === null) return;
+      if (v === null || (i % every && i !== t.length - 1)) return;
       const x = left + (t[i] / (tmax || 1)) * w;
       const y = top + h - (hi > lo ? (v - lo) / (hi - lo) : 0.5) * h;
       if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
