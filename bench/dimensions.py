@@ -1,43 +1,136 @@
-"""3D against 2D Vicsek, float64 and float32, in one process: agent-steps per second at
-density 4, r = 1, full noise, v0 = 0.5 (the hand-written peer kernel's workload).
+"""3D against 2D, in one process per model: agent-steps per second and peak memory.
 
-    python -m bench.dimensions [N] [STEPS]       # default 10^6 agents, 20 steps
+    python -m bench.dimensions                       # Vicsek, float64 and float32, 10^6
+    python -m bench.dimensions --models vicsek flocking formation --precision float64
+    python -m bench.dimensions --n 100000 --steps 10
 
-The rate is the difference of a 5-step and a (5 + STEPS)-step run, which cancels set-up:
-meant for N >= 10^5, where the steps dominate (below, the difference is noise).
+Vicsek: density 4, r = 1, full noise, v0 = 0.5 (the hand-written peer kernel's workload).
+Flocking (switching topology) and formation (F1, F2): the workloads of bench/bench.py
+(bench/workload_flocking.py, bench/workload_formation.py) and their 3D counterparts, the
+same with a third coordinate: the lattice of spacing 1 becomes a cubic one (about 33
+neighbours within R = 2 against 12 in 2D), the formation's square of one agent per d^2
+a cube of one per d^3, its hexagonal formation a cubic lattice, its leader's target
+(x, 0, 0). The rate is the difference of a 5-step and a (5 + STEPS)-step run, which cancels
+set-up: meant for N >= 10^5, where the steps dominate. Each (model, dimension, precision)
+runs in a fresh process so that its peak resident memory, less that of the same process
+after a 2-step run at N = 1000 (imports, Taichi, compiled kernels), divided by N is the
+bytes per agent the run itself needs.
 """
+
+from __future__ import annotations
+
+import argparse
 import json
+import resource
+import subprocess
 import sys
 import time
 
-from flocklab import kernels
-from flocklab.schemas import Scenario
-
-N = int(sys.argv[1]) if len(sys.argv) > 1 else 1_000_000
-STEPS = int(sys.argv[2]) if len(sys.argv) > 2 else 20
+from bench import workload_flocking, workload_formation
 
 
-def scenario(dim: int, steps: int, precision: str = "float64") -> Scenario:
-    L = (N / 4) ** (1 / dim)
-    return Scenario.model_validate({
+def vicsek(n: int, dim: int) -> dict:
+    return {
         "model": {"kind": "vicsek", "rule": "vicsek", "v0": 0.5, "eta": 6.283185307179586,
                   "track_linked_intervals": False},
-        "space": {"kind": "periodic", "L": L, "dimension": dim},
+        "space": {"kind": "periodic", "L": (n / 4) ** (1 / dim), "dimension": dim},
         "neighbours": {"radius": 1.0},
-        "initial": {"kind": "random", "N": N},
-        "time": {"steps": steps, "dt": 1.0},
-        "recording": {"every": 0, "observables_every": steps},
-        "seed": 1, "precision": precision})
+        "initial": {"kind": "random", "N": n},
+        "time": {"steps": 10, "dt": 1.0},
+        "recording": {"every": 0},
+        "seed": 1}
 
 
-for precision in ("float64", "float32"):
-    for dim in (2, 3):
-        kernels.run(scenario(dim, 2, precision))  # compile
-        times = []
-        for steps in (5, 5 + STEPS):  # the difference cancels set-up and first observation
-            t = time.perf_counter()
-            kernels.run(scenario(dim, steps, precision))
-            times.append(time.perf_counter() - t)
-        dt = times[1] - times[0]
-        print(json.dumps({"dim": dim, "precision": precision, "N": N, "steps": STEPS,
-                          "agent_steps_per_s": round(N * STEPS / dt)}), flush=True)
+def flocking(n: int, dim: int) -> dict:
+    doc = workload_flocking.flocking_switching(n)
+    doc.pop("name")
+    doc["space"]["dimension"] = dim
+    if dim == 3:
+        doc["initial"]["region"]["low"] = [0.0, 0.0, 0.0]  # the cubic lattice
+    return doc
+
+
+def formation(design: str):
+    def make(n: int, dim: int) -> dict:
+        doc = workload_formation.f1(n) if design == "F1" else workload_formation.f2(n)
+        doc.pop("name")
+        if dim == 3:
+            half = workload_formation.D * n ** (1 / 3) / 2.0
+            doc["space"]["dimension"] = 3
+            doc["initial"]["region"] = {"kind": "box", "low": [-half] * 3, "high": [half] * 3}
+            doc["model"]["path"]["target"] = [half, 0.0, 0.0]
+            if design == "F1":
+                doc["model"]["formation"] = {"kind": "named", "shape": "cube"}
+        return doc
+    return make
+
+
+MODELS = {"vicsek": [("vicsek", vicsek)], "flocking": [("flocking/switching", flocking)],
+          "formation": [("formation/F1", formation("F1")), ("formation/F2", formation("F2"))]}
+
+
+def one(label: str, n: int, dim: int, steps: int, precision: str) -> dict:
+    """Rate and peak memory of one configuration (run in a fresh process)."""
+    from flocklab import kernels
+    from flocklab.schemas import Scenario
+
+    make = dict(w for ws in MODELS.values() for w in ws)[label]
+
+    def scenario(size: int, k: int) -> Scenario:
+        doc = make(size, dim)
+        doc["time"]["steps"] = k
+        doc["recording"] = {"every": 0, "observables_every": k}
+        doc["precision"] = precision
+        return Scenario.model_validate(doc)
+
+    kernels.run(scenario(1000, 2))  # compile (or load) the kernels on a small swarm
+    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    times = []
+    for k in (5, 5 + steps):  # the difference cancels set-up and the first observation
+        t = time.perf_counter()
+        res = kernels.run(scenario(n, k))
+        times.append(time.perf_counter() - t)
+        if res.status != "completed":
+            return {"model": label, "dim": dim, "status": res.status, "error": res.error}
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    return {"model": label, "dim": dim, "precision": precision, "N": n, "steps": steps,
+            "engine_path": res.extra["engine_path"],
+            "agent_steps_per_s": round(n * steps / (times[1] - times[0])),
+            "bytes_per_agent": round((peak - base) / n)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--models", nargs="+", choices=list(MODELS), default=["vicsek"])
+    ap.add_argument("--precision", nargs="+", choices=["float64", "float32"],
+                    default=["float64", "float32"])
+    ap.add_argument("--n", type=int, default=1_000_000)
+    ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--one", nargs=3, metavar=("LABEL", "DIM", "PRECISION"),
+                    help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.one:
+        label, dim, precision = args.one
+        print(json.dumps(one(label, args.n, int(dim), args.steps, precision)), flush=True)
+        return 0
+    for precision in args.precision:
+        for model in args.models:
+            for label, _ in MODELS[model]:
+                rates = {}
+                for dim in (2, 3):
+                    out = subprocess.run(
+                        [sys.executable, "-m", "bench.dimensions", "--one", label, str(dim),
+                         precision, "--n", str(args.n), "--steps", str(args.steps)],
+                        capture_output=True, text=True, check=True)
+                    line = json.loads(out.stdout.strip().splitlines()[-1])
+                    rates[dim] = line.get("agent_steps_per_s")
+                    print(json.dumps(line), flush=True)
+                if (rates[2] or 0) > 0 and (rates[3] or 0) > 0:
+                    print(json.dumps({"model": label, "precision": precision,
+                                      "ratio_3d_to_2d": round(rates[3] / rates[2], 2)}),
+                          flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -444,3 +444,17 @@ def test_the_3d_example_is_the_preset_and_keeps_its_shell(taichi_cpu):
     # leader by about the same vector: the shell is kept (before the turn at 8 s).
     assert f["formation_error_max"] - f["formation_error"] < 0.1
     assert f["min_distance"] > 0.99 * D
+
+
+def test_d3_in_3d_scales_to_large_components():
+    # One component of 2 x 10^5 directions spread over the sphere surrounds r^; cut by the
+    # plane z = 0 it does not; 10^5 lone agents do not. (The primal LP needed a K x K matrix.)
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=(200_000, 3))
+    one = np.zeros(len(u), dtype=np.int64)
+    assert d3_holds_3d(u, one, 1e-6)
+    assert not d3_holds_3d(np.abs(u), one, 1e-6)  # one octant
+    half = u.copy()
+    half[:, 2] = np.abs(half[:, 2])
+    assert not d3_holds_3d(half, one, 1e-6)
+    assert not d3_holds_3d(u[:100_000], np.arange(100_000), 1e-6)

@@ -13,9 +13,10 @@ Components come from the engine's union-find forest (`roots`).
 In 3D "line" becomes "plane through r^", and D3 is tested as an LP: by Stiemke's lemma no
 plane through r^ has agents of a component strictly on one side only exactly when some
 strictly positive weights lambda_k put r^ at the weighted mean of the directions u_k from r^
-to its agents (sum lambda_k u_k = 0). `d3_holds_3d` maximises the smallest weight t
-(sum lambda = 1) and requires t > 1e-9 / K for K agents (the analogue of the angular
-tolerance in 2D).
+to its agents (sum lambda_k u_k = 0), and that fails exactly when some w has u_k . w >= 0
+for all k and > 0 for one. `surrounds_3d` solves the second (three variables, K
+constraints) and counts a half-space whose agents' sum of u_k . w is at most 1e-7 as
+"all on the plane".
 """
 
 from __future__ import annotations
@@ -26,6 +27,9 @@ from scipy.optimize import linprog
 from .norms import norms
 
 _ANGLE_TOL = 1e-9
+# 3D: the largest sum of u_k . w over a half-space's agents that still counts as "on the
+# plane" (rounding, and the LP's feasibility tolerance of 1e-10 per agent).
+_PLANE_TOL = 1e-7
 
 
 def roots(parent: np.ndarray) -> np.ndarray:
@@ -76,21 +80,22 @@ def d3_holds(rel: np.ndarray, labels: np.ndarray, tol: float) -> bool:
 
 def surrounds_3d(u: np.ndarray) -> bool:
     """Whether the origin is a strictly positive combination of the rows of u (unit
-    3-vectors): every plane through it then has rows strictly on both sides or none off it."""
+    3-vectors): every plane through it then has rows strictly on both sides or none off it.
+    By Stiemke's lemma that fails exactly when some w has u_k . w >= 0 for every k and > 0
+    for one, so the test is the dual LP in three variables, max sum_k u_k . w subject to
+    u_k . w >= 0, |w_i| <= 1: K constraints of 3 numbers each (the primal, K weights, took a
+    dense K x K matrix: 6.6 TiB for a 10^6-agent component)."""
     k = len(u)
     if k == 1:
-        return False
-    # variables (lambda_1..lambda_K, t): maximise t, sum lambda u = 0, sum lambda = 1,
-    # lambda_k >= t
-    a_eq = np.zeros((4, k + 1))
-    a_eq[:3, :k] = u.T
-    a_eq[3, :k] = 1.0
-    a_ub = np.concatenate([-np.eye(k), np.ones((k, 1))], axis=1)
-    cost = np.zeros(k + 1)
-    cost[k] = -1.0
-    res = linprog(cost, A_ub=a_ub, b_ub=np.zeros(k), A_eq=a_eq, b_eq=[0.0, 0.0, 0.0, 1.0],
-                  bounds=[(0.0, None)] * k + [(None, 1.0)], method="highs")
-    return bool(res.status == 0 and -res.fun > _ANGLE_TOL / k)
+        return False  # the plane normal to u_0 has it on one side only
+    c = u.sum(axis=0)
+    norm = float(np.sqrt(c @ c))
+    if norm > 0 and float((u @ (c / norm)).min()) > _ANGLE_TOL:
+        return False  # every row strictly on the side of their mean direction
+    res = linprog(-c, A_ub=-u, b_ub=np.zeros(k), bounds=[(-1.0, 1.0)] * 3, method="highs",
+                  options={"primal_feasibility_tolerance": 1e-10,
+                           "dual_feasibility_tolerance": 1e-10})
+    return bool(res.status == 0 and -res.fun <= _PLANE_TOL)
 
 
 def d3_holds_3d(rel: np.ndarray, labels: np.ndarray, tol: float) -> bool:
@@ -99,4 +104,10 @@ def d3_holds_3d(rel: np.ndarray, labels: np.ndarray, tol: float) -> bool:
     far = dist > tol
     u = rel[far] / dist[far, None]
     lab = labels[far]
-    return all(surrounds_3d(u[lab == c]) for c in np.unique(lab))
+    order = np.argsort(lab, kind="stable")
+    u, lab = u[order], lab[order]
+    cuts = np.flatnonzero(lab[1:] != lab[:-1]) + 1
+    sizes = np.diff(np.r_[0, cuts, len(lab)])
+    if len(lab) and sizes.min() == 1:
+        return False  # a lone agent off r^ (most components early in a run)
+    return all(surrounds_3d(group) for group in np.split(u, cuts))
