@@ -16,7 +16,6 @@ from flocklab import kernels
 from flocklab.kernels.models.flocking.topology import build_edges, to_csr
 from flocklab.schemas import PRESETS, Scenario
 from flocklab.schemas.flocking import GraphSpec
-from tests import test_flocking_reference as reference
 from tests.test_flocking_reference import (
     fused_or_skip,
     lattice,
@@ -25,7 +24,8 @@ from tests.test_flocking_reference import (
     pair_geometry,
 )
 
-path = reference.path  # the fixture: both engine paths
+# Taichi on the CPU for every test (the two-path `path` fixture does not start it).
+pytestmark = pytest.mark.usefixtures("taichi_cpu")
 
 
 def run_states(sc: Scenario, every: int = 1, path: str = "per_step"):

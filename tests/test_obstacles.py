@@ -15,7 +15,6 @@ from scipy.sparse.csgraph import connected_components
 
 from flocklab import kernels
 from flocklab.schemas import PRESETS, Scenario
-from tests import test_flocking_reference as reference
 from tests.test_flocking_reference import (
     fused_or_skip,
     lattice,
@@ -25,7 +24,8 @@ from tests.test_flocking_reference import (
     pair_geometry,
 )
 
-path = reference.path  # the fixture: both engine paths
+# Taichi on the CPU for every test (the two-path `path` fixture does not start it).
+pytestmark = pytest.mark.usefixtures("taichi_cpu")
 
 
 def nav_at(k, points: np.ndarray) -> np.ndarray:
