@@ -38,7 +38,7 @@ def field_errors(exc: ValidationError, prefix: tuple[str | int, ...] = ()) -> li
     """Every problem of a pydantic ValidationError, with dotted paths and readable messages."""
     out = []
     for e in exc.errors(include_url=False):
-        path = [p for p in (*prefix, *e["loc"]) if not _is_union_tag(p)]
+        path = _without_union_tags((*prefix, *e["loc"]))
         loc = ".".join(str(p) for p in path)
         msg = e["msg"]
         if msg.startswith("Value error, "):
@@ -50,15 +50,27 @@ def field_errors(exc: ValidationError, prefix: tuple[str | int, ...] = ()) -> li
     return out
 
 
-def _is_union_tag(part: str | int) -> bool:
+def _without_union_tags(loc: tuple[str | int, ...]) -> list[str | int]:
     """Pydantic puts the chosen union member in the path ('model.vicsek.eta'); users wrote
-    'model.eta', so those segments are dropped."""
+    'model.eta', so those segments are dropped. A member's fields come right after its tag,
+    so a segment just after a dropped tag is a field, even one named like a tag: the
+    field 'formation' of model 'formation' ('model.formation.formation.offsets' reads
+    'model.formation.offsets')."""
     from .catalog import MODELS
 
-    return isinstance(part, str) and (part in MODELS or part in _MEMBER_TAGS)
+    out: list[str | int] = []
+    after_tag = False
+    for part in loc:
+        tag = isinstance(part, str) and (part in MODELS or part in _MEMBER_TAGS)
+        if tag and not after_tag:
+            after_tag = True
+            continue
+        after_tag = False
+        out.append(part)
+    return out
 
 
-_MEMBER_TAGS = {"periodic", "plane", "box", "disc", "lattice", "random", "explicit",
+_MEMBER_TAGS = {"periodic", "plane", "box", "disc", "ball", "lattice", "random", "explicit",
                 "path-axis", "zip-axis"}  # the last two: a sweep's axis kinds
 
 

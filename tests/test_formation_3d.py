@@ -376,9 +376,7 @@ def test_bad_3d_models_name_their_field(change, loc, words):
                 "path": copy.deepcopy(STRAIGHT), "schedule": []}, N=2)
     change(spec)
     (got_loc, msg), = field_errors_of(spec)
-    # (schemas/problems.py drops every segment named like a model kind, so the field
-    # 'formation' of model 'formation' reads as 'model')
-    assert got_loc == loc.replace(".formation", "") and words in msg, (got_loc, msg)
+    assert got_loc == loc and words in msg, (got_loc, msg)
 
 
 @pytest.mark.parametrize("model, words", [

@@ -192,3 +192,15 @@ def test_vicsek_noise_above_two_pi_is_refused():
     assert VicsekParams.model_validate({"eta": 2 * math.pi}).eta == 2 * math.pi
     with pytest.raises(ValidationError, match=r"less than or equal to 6\.28"):
         VicsekParams.model_validate({"eta": 9.0})
+
+
+@pytest.mark.parametrize("loc, want", [
+    (("model", "vicsek", "eta"), "model.eta"),
+    (("model", "formation", "formation", "offsets", 1), "model.formation.offsets.1"),
+    (("initial", "random", "region", "ball", "radius"), "initial.region.radius"),
+    (("space", "periodic", "L"), "space.L"),
+])
+def test_field_paths_drop_union_tags_but_not_fields_named_like_them(loc, want):
+    from flocklab.schemas.problems import _without_union_tags
+
+    assert ".".join(str(p) for p in _without_union_tags(loc)) == want
