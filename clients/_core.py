@@ -15,7 +15,8 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from flocklab.schemas import Scenario
+from flocklab.schemas import Problem, Scenario
+from flocklab.schemas.status import JobView
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 TERMINAL = frozenset({"succeeded", "failed", "cancelled", "timed_out"})
@@ -157,31 +158,42 @@ def observable_pages(pages: list[dict[str, Any]]) -> dict[str, Any]:
             "observables": obs}
 
 
-class JobState:
-    """The fields of a job, shared by `Job` and `AsyncJob`."""
+class JobFields:
+    """The fields of a job, shared by `Job` and `AsyncJob`: `state` is the `JobView` of the
+    last response (typed: datetimes, the error as a `Problem`), `data` the same as JSON."""
 
-    data: dict[str, Any]
+    state: JobView
+    _data: dict[str, Any]
+
+    @property
+    def data(self) -> dict[str, Any]:
+        return self._data
+
+    @data.setter
+    def data(self, value: dict[str, Any]) -> None:
+        self.state = JobView.model_validate(value)
+        self._data = value
 
     @property
     def id(self) -> str:
-        return self.data["id"]
+        return self.state.id
 
     @property
     def status(self) -> str:
-        return self.data["status"]
+        return self.state.status
 
     @property
     def progress(self) -> float:
-        return self.data["progress"]
+        return self.state.progress
 
     @property
     def done(self) -> bool:
         return self.status in TERMINAL
 
     @property
-    def error(self) -> dict[str, Any] | None:
+    def error(self) -> Problem | None:
         """The problem that ended the job (failed, timed out), else None."""
-        return self.data.get("error") if self.status in ("failed", "timed_out") else None
+        return self.state.error if self.status in ("failed", "timed_out") else None
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.id} {self.status} {self.progress:.0%}>"
@@ -197,7 +209,7 @@ class ProgressBar:
         self.enabled = self.stream.isatty() if enabled is None else enabled
         self._last = ""
 
-    def update(self, job: JobState) -> None:
+    def update(self, job: JobFields) -> None:
         if not self.enabled:
             return
         filled = int(job.progress * self.WIDTH)

@@ -131,7 +131,7 @@ class AsyncClient:
         return (await self.request("GET", "/healthz")).json()
 
 
-class AsyncJob(_core.JobState):
+class AsyncJob(_core.JobFields):
     def __init__(self, client: AsyncClient, data: dict[str, Any]):
         self.client = client
         self.data = data

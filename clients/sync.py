@@ -147,7 +147,7 @@ class Client:
         return self.request("GET", "/healthz").json()
 
 
-class Job(_core.JobState):
+class Job(_core.JobFields):
     """A handle on one job; its fields are those of the last response (`refresh()`)."""
 
     def __init__(self, client: Client, data: dict[str, Any]):

@@ -1,5 +1,5 @@
-"""What the service answers about a sweep, shared with the client (which parses its
-responses into these models)."""
+"""What the service answers about a job or a sweep, shared with the client (which parses
+its responses into these models)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,51 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from .problems import Problem
 
-SweepState = Literal["queued", "running", "succeeded", "failed", "cancelled", "timed_out"]
+JobState = Literal["queued", "running", "succeeded", "failed", "cancelled", "timed_out"]
+SweepState = JobState
+
+
+class JobView(BaseModel):
+    """A job as the API shows it."""
+
+    model_config = ConfigDict(json_schema_extra={"examples": [{
+        "id": "3f2b8e1c-8f3a-4c55-9d2e-0c6b1f8e9a41", "status": "running", "progress": 0.42,
+        "steps_done": 210, "steps_total": 500, "model": "vicsek", "n_agents": 300,
+        "created_at": "2024-05-01T12:00:00Z", "started_at": "2024-05-01T12:00:00.1Z",
+        "finished_at": None, "attempts": 1, "cancel_requested": False, "backend": None,
+        "timeout_seconds": 3600.0, "error": None, "results": "pending",
+        "results_expire_at": None, "checksums": None,
+        "links": {"self": "/v1/jobs/3f2b8e1c-8f3a-4c55-9d2e-0c6b1f8e9a41"},
+    }]})
+
+    id: str = Field(description="The job's id (a UUID).")
+    status: JobState
+    progress: float = Field(ge=0, le=1, description="Fraction of steps done.")
+    steps_done: int
+    steps_total: int
+    model: str = Field(description="The scenario's model kind.")
+    n_agents: int
+    created_at: dt.datetime
+    started_at: dt.datetime | None = Field(description="Start of the latest attempt.")
+    finished_at: dt.datetime | None
+    attempts: int = Field(description="Attempts started (a lost worker is retried once).")
+    cancel_requested: bool
+    backend: str | None = Field(description="The Taichi backend that ran the job.")
+    timeout_seconds: float
+    error: Problem | None = Field(
+        description="Why the job failed or timed out; for a queued job, why its previous "
+        "attempt was interrupted.")
+    results: Literal["pending", "available", "none", "expired"] = Field(
+        description="pending: not finished; available: metrics and trajectory can be "
+        "fetched; none: the job ended without results; expired: deleted after the TTL.")
+    results_expire_at: dt.datetime | None
+    checksums: dict[str, str] | None = Field(description="sha256 (hex) of each result file.")
+    links: dict[str, str]
+
+
+class JobList(BaseModel):
+    items: list[JobView]
+    next_cursor: str | None = Field(description="Pass as `cursor` for the next page.")
 
 
 class SweepStatus(BaseModel):

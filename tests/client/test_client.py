@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from flocklab import clients
-from flocklab.schemas import Scenario
+from flocklab.schemas import Problem, Scenario
+from flocklab.schemas.status import JobView
 
 from .conftest import LONG, scenario
 
@@ -40,6 +41,10 @@ def test_submit_wait_and_fetch_results(server, tmp_path, capsys):
         assert job.wait(timeout=120, progress=True) is job
         assert job.status == "succeeded" and job.done and job.error is None
         assert "100%" in capsys.readouterr().err
+        # Typed: the job is the schemas' JobView (datetimes, links), `data` its JSON.
+        assert isinstance(job.state, JobView) and job.state.results == "available"
+        assert job.state.finished_at >= job.state.created_at and job.state.finished_at.tzinfo
+        assert job.state.steps_done == job.data["steps_done"] == 20
 
         m = job.metrics()
         assert m["summary"]["n_agents"] == 80
@@ -161,3 +166,17 @@ def test_async_client(server):
             assert [m["kind"] for m in await c.models()]
 
     asyncio.run(main())
+
+
+def test_a_failed_job_carries_its_problem_typed(server):
+    # Two agents at one point: the pair force is infinite at the first step.
+    body = {"model": {"kind": "flocking"}, "space": {"kind": "plane"},
+            "neighbours": {"radius": 2.0},
+            "initial": {"kind": "explicit", "positions": [[0, 0], [0, 0], [1, 0]]},
+            "time": {"steps": 50, "dt": 0.01}, "recording": {"every": 1}}
+    with clients.Client(server.url) as c:
+        job = c.submit(body).wait(timeout=120)
+    assert job.status == "failed"
+    assert isinstance(job.error, Problem) and job.error.type.endswith("diverged")
+    assert job.error.model_extra["step"] <= 2 and job.error.status >= 400
+

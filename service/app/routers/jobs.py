@@ -11,6 +11,7 @@ from fastapi.responses import JSONResponse, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from flocklab.schemas import FieldError
+from flocklab.schemas.status import JobList, JobState, JobView
 from flocklab.service.jobs import IdempotencyConflict, NewJob, QueueFull
 
 from ..admission import queue_full, queue_gauge
@@ -18,7 +19,7 @@ from ..deps import HubDep, JobId, RuntimeDep, SettingsDep, get_job
 from ..follow import Until, cancel_row, event_stream, long_poll
 from ..problems import ProblemError, invalid
 from ..submission import parse_submission
-from ..wire import EXAMPLE_SCENARIO, JobList, JobView, Status, job_view
+from ..wire import EXAMPLE_SCENARIO, job_view
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
@@ -88,7 +89,7 @@ async def submit(
 def list_jobs(
     runtime: RuntimeDep,
     settings: SettingsDep,
-    status: Annotated[list[Status] | None, Query(description="Only these statuses.")] = None,
+    status: Annotated[list[JobState] | None, Query(description="Only these statuses.")] = None,
     model: Annotated[str | None, Query(max_length=100, description="Only this model kind.")
                      ] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,

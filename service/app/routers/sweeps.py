@@ -16,7 +16,7 @@ from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse, Response, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
-from flocklab.schemas.status import SweepList, SweepStatus
+from flocklab.schemas.status import SweepList, SweepState, SweepStatus
 from flocklab.service.jobs import IdempotencyConflict, Job, JobRuntime, NewJob, QueueFull
 from flocklab.service.sweeps.tables import read_table
 
@@ -26,7 +26,6 @@ from ..follow import Until, cancel_row, event_stream, long_poll
 from ..problems import ProblemError
 from ..sweep_submission import parse_sweep_submission
 from ..sweep_wire import EXAMPLE_SWEEP, sweep_view
-from ..wire import Status
 from .jobs import _decode_cursor, _encode_cursor
 
 router = APIRouter(prefix="/sweeps", tags=["sweeps"])
@@ -107,7 +106,7 @@ async def submit(
 def list_sweeps(
     runtime: RuntimeDep,
     settings: SettingsDep,
-    status: Annotated[list[Status] | None, Query(description="Only these statuses.")] = None,
+    status: Annotated[list[SweepState] | None, Query(description="Only these statuses.")] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     cursor: Annotated[str | None, Query(max_length=64, description="From `next_cursor`.")
                       ] = None,
