@@ -39,10 +39,13 @@ def _preset(name: str, steps: int) -> Scenario:
     ("fused", _scenario(20_000)),  # 2D, N <= 10^4: the fused small-N kernels
     # the flocking kernels' rows, lambda2 (computed per window on the host) among them
     ("fused", _preset("tjp-switching", 40_000)),
-    ("per_step", _scenario(100, dimension=3, every=1)),  # 3D takes the per-step path
+    ("per_step", _scenario(100, dimension=3, every=1)),  # forced onto the per-step path
 ], ids=["vicsek-fused", "flocking-fused", "vicsek-3d-per-step"])
-def test_rows_handed_over_are_a_prefix_and_change_no_bit(path, sc):
+def test_rows_handed_over_are_a_prefix_and_change_no_bit(path, sc, monkeypatch):
     from flocklab import kernels
+
+    if path == "per_step":
+        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
 
     alone = kernels.run(sc)
     got: list[dict[str, np.ndarray]] = []
