@@ -86,7 +86,13 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
     LLVM re-generates at every process start. The arithmetic of a step is the same in
     both, so a replica's bits do not depend on `full`. `dim` 3: the vicsek rule only."""
     vicsek = rule == RULES["vicsek"]
-    vec = ti.types.vector(dim, float)
+
+    @ti.func
+    def vec(x):
+        """The dim-vector (x, ..., x), typed when the kernel compiles: a vector type made
+        here would keep the float width of the runtime that first called this factory
+        (a float32 run's, cached for every later float64 one)."""
+        return ti.Vector([x for _ in ti.static(range(dim))])
 
     @ti.func
     def load(k, i, pos: ti.template(), ew: ti.template(), theta: ti.template(),
