@@ -262,3 +262,21 @@ def test_an_unknown_precision_is_refused():
     with pytest.raises(ValueError):
         Scenario.model_validate({**vk.scenario().model_dump(mode="json"),
                                  "precision": "float16"})
+
+
+@pytest.mark.parametrize("rule, L", [("average", None), ("vicsek", None), ("laplacian", 6.0)])
+def test_a_float64_run_after_a_float32_one_of_the_same_kernel_is_float64(rule, L,
+                                                                         monkeypatch):
+    # Kernel factories are cached per variant, not per precision: nothing they build in
+    # Python may keep the float width of the runtime that first called them (a vector
+    # type made at factory time did: 1e-8 errors in the float64 runs that followed).
+    sc = vk.scenario(rule=rule, L=L, eta=0.3, steps=10, every=0,
+                     g=61.0 if rule == "laplacian" else None)
+    assert kernels.run(f32(sc)).extra["engine_path"] == "fused"
+    fused = kernels.run(sc)
+    monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
+    per_step = kernels.run(sc)
+    assert (fused.extra["engine_path"], per_step.extra["engine_path"]) == ("fused", "per_step")
+    for k in ("polarization", "heading_spread"):
+        assert np.allclose(fused.observables[k], per_step.observables[k], rtol=0,
+                           atol=1e-11), k
