@@ -1,36 +1,16 @@
-"""The derived per-agent arrays over HTTP: a real `flocklab serve` on 127.0.0.1 with its
-spawned worker runs a job recording `degree` at a periodic radius beyond L/2, serves it
-from the trajectory route, and refuses `radius` for Vicsek as problem+json."""
+"""The derived per-agent arrays over HTTP: the shared real `flocklab serve` on 127.0.0.1
+(tests/service/conftest.py) with its spawned worker runs a job recording `degree` at a
+periodic radius beyond L/2, serves it from the trajectory route, and refuses `radius` for
+Vicsek as problem+json."""
 
 from __future__ import annotations
 
-import contextlib
 import io
-import os
-import signal
 
-import httpx
 import numpy as np
-import pytest
 
-from flocklab.service.serve import ServerProcess
 from tests.reference import degrees
-from tests.service.conftest import TEST_ENV
 from tests.service.svc_helpers import assert_problem, scenario, submit, wait_for
-
-
-@pytest.fixture(scope="module")
-def http(tmp_path_factory):
-    s = ServerProcess(tmp_path_factory.mktemp("derived") / "data", env=TEST_ENV).start()
-    try:
-        with httpx.Client(base_url=s.url, timeout=30) as c:
-            yield c
-    finally:
-        workers = s.children()
-        s.stop()
-        for pid in workers:  # only this server's own workers, by pid
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
 
 
 def test_a_job_serves_the_degrees_it_recorded(http):
