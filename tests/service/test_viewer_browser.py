@@ -69,11 +69,12 @@ def canvas_ink(page, selector: str = "#canvas") -> float:
 
 
 def preset_form(page, name: str, fields: dict[str, str]) -> None:
-    """Choose a preset and fill form fields once the form has settled: choosing a preset
-    rebuilds the form after fetching its model's schema, which replaced fields filled too
-    early (a job then ran with the preset's own values)."""
+    """Choose a preset and fill form fields once the form shows it: choosing a preset
+    rebuilds the form after fetching its model's schema, and the page's own first preset
+    may still be fetching (the viewer builds only the newest; the form says which)."""
     page.select_option("#preset", name)
-    page.wait_for_load_state("networkidle")
+    page.wait_for_selector(f'#fields[data-preset="{name}"]')
+    assert page.locator('#fields .field[data-path="time.steps"]').count() == 1
     for path, value in fields.items():
         page.fill(f'#fields .field[data-path="{path}"] input', value)
     for path, value in fields.items():
@@ -133,6 +134,36 @@ def test_submit_follow_play_and_validation(browser, server, tmp_path):
     assert "invalid" in (row.get_attribute("class") or "")
     assert all("status of 422" in e for e in w.errors), w.errors
     assert w.hosts == {"127.0.0.1"}, w.hosts
+
+
+def test_preset_picked_while_the_first_one_loads(browser, server):
+    """The page's first preset still fetching its model's schema when another is picked:
+    the form shows the picked preset alone (both once appended their rows, and the first
+    preset's values were what a submit sent)."""
+    page = browser.new_page()
+    held: list = []
+
+    def hold_first(route):
+        if held:
+            route.continue_()
+        else:
+            held.append(route)  # the page's own first fetch, answered below
+
+    page.route("**/v1/models/*", hold_first)
+    page.goto(server.url + "/")
+    page.wait_for_selector("#preset option", state="attached")
+    assert page.input_value("#preset") != "vicsek-1995"
+    page.select_option("#preset", "vicsek-1995")
+    page.wait_for_function("""() => [...document.querySelectorAll(
+        '#fields .field[data-path="initial.N"] input')].some((i) => i.value === "300")""")
+    assert len(held) == 1
+    held[0].continue_()  # the first preset's schema arrives last
+    page.wait_for_load_state("networkidle")
+    page.wait_for_timeout(300)
+    assert page.locator('#fields .field[data-path="initial.N"]').count() == 1
+    assert page.get_attribute("#fields", "data-preset") == "vicsek-1995"
+    assert page.input_value('#fields .field[data-path="initial.N"] input') == "300"
+    page.close()
 
 
 def curve_pixels(page) -> int:

@@ -84,14 +84,22 @@ function modelProperty(schema, path) {
   return (schema.properties || {})[path.split(".")[1]] || null;
 }
 
+// Each call of showPreset takes a number; only the newest builds the form. Two calls in
+// flight (the page's first preset still fetching its schema when the user picks another)
+// otherwise both appended their rows, and the older preset's values were submitted.
+let presetShown = 0;
+
 async function showPreset(name) {
+  const call = ++presetShown;
   const preset = state.presets.find((p) => p.name === name);
   const fields = $("fields");
   fields.replaceChildren();
+  delete fields.dataset.preset;
   $("submit-error").textContent = "";
   if (!preset) return;
   let schema = null;
   try { schema = await api(`/v1/models/${preset.scenario.model.kind}`); } catch (e) { /* plain */ }
+  if (call !== presetShown) return;
   for (const [path, value] of flatten(preset.scenario, "", [])) {
     const row = document.createElement("div");
     row.className = "field";
@@ -126,6 +134,7 @@ async function showPreset(name) {
     row.append(label, input, msg);
     fields.append(row);
   }
+  fields.dataset.preset = name;
   state.scenario = preset.scenario;
   const axis = $("sweep-axis");
   axis.replaceChildren(...flatten(preset.scenario, "", [])
