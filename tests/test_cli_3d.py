@@ -35,14 +35,17 @@ def test_run_writes_a_3d_trajectory(tmp_path):
         assert np.allclose(np.linalg.norm(head, axis=2), 1.0)
 
 
-def test_render_refuses_a_3d_snapshot_and_plots_its_observables(tmp_path):
+def test_render_draws_a_3d_snapshot_and_plots_its_observables(tmp_path):
+    """`flocklab render` of a 3D run: its last frame through the 3D camera (every agent),
+    and its observables (tests/render/test_render_3d.py: the pictures themselves)."""
     path = tmp_path / "s.json"
     path.write_text(json.dumps({**SMALL_3D, "time": {"steps": 5}}))
     out = tmp_path / "out"
     assert flocklab("run", str(path), "--out", str(out)).returncode == 0
     proc = flocklab("render", str(out), "--out", str(tmp_path / "a.png"))
-    assert proc.returncode == 2 and "3D run" in proc.stderr
-    assert "Traceback" not in proc.stderr
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["agents"] == SMALL_3D["initial"]["N"]
+    assert (tmp_path / "a.png").read_bytes().startswith(b"\x89PNG")
     plot = flocklab("render", str(out), "--out", str(tmp_path / "b.png"), "--plot")
     assert plot.returncode == 0, plot.stderr
     assert (tmp_path / "b.png").stat().st_size > 0

@@ -109,10 +109,6 @@ def render(args: argparse.Namespace) -> dict[str, object]:
         save(fig, out)
         return {"kind": "sweep", "measures": drawn, "axes": sweep.axes}
     run = RunData(folder)
-    if run.doc["space"].get("dimension", 2) != 2 and args.plot is None:
-        # The snapshot and movie scenes are drawn in the plane.
-        raise RenderInputError(f"{folder}: a 3D run; snapshots and movies are drawn for 2D "
-                               "runs only (--plot draws its observables)")
     if args.movie:
         from flocklab.service.cli import ProgressBar
 

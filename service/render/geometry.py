@@ -25,7 +25,7 @@ _CANDIDATES = 1 << 20  # candidate pairs tested at a time (a few tens of MiB)
 def metric_edges(pos: np.ndarray, radius: float, inclusive: bool, box: float | None
                  ) -> np.ndarray:
     """(E, 2) agent pairs i < j within the radius (minimum image in a periodic box),
-    sorted by (i, j)."""
+    sorted by (i, j); positions (N, 2) or (N, 3)."""
     if len(pos) <= BRUTE_FORCE_MAX:
         return _all_pairs(pos, radius, inclusive, box)
     from scipy.spatial import cKDTree
@@ -34,7 +34,7 @@ def metric_edges(pos: np.ndarray, radius: float, inclusive: bool, box: float | N
     pairs = tree.query_pairs(radius, output_type="ndarray")
     if not inclusive and len(pairs):
         d = displacement(pos[pairs[:, 0]], pos[pairs[:, 1]], box)
-        pairs = pairs[np.hypot(d[:, 0], d[:, 1]) < radius]
+        pairs = pairs[distance(d) < radius]
     pairs = pairs.reshape(-1, 2)
     return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
 
@@ -71,7 +71,7 @@ def _all_pairs(pos: np.ndarray, radius: float, inclusive: bool, box: float | Non
         j = i + 1 + np.arange(len(i)) - np.repeat(np.cumsum(c) - c, c)
         a, b = order[i], ids[j]
         d = displacement(pos[a], pos[b], box)
-        dist = np.hypot(d[:, 0], d[:, 1])
+        dist = distance(d)
         near = dist <= radius if inclusive else dist < radius
         a, b = a[near].astype(np.int64), b[near].astype(np.int64)
         found.append(np.minimum(a, b) * n + np.maximum(a, b))
@@ -86,6 +86,13 @@ def displacement(a: np.ndarray, b: np.ndarray, box: float | None) -> np.ndarray:
     if box is not None:
         d -= box * np.round(d / box)
     return d
+
+
+def distance(d: np.ndarray) -> np.ndarray:
+    """|d| of (K, dim) displacements (np.hypot in the plane, as the 2D tests count)."""
+    if d.shape[1] == 2:
+        return np.hypot(d[:, 0], d[:, 1])
+    return np.sqrt((d * d).sum(axis=1))
 
 
 def interaction_edges(run: RunData, pos: np.ndarray) -> np.ndarray | None:
@@ -110,17 +117,17 @@ def interaction_edges(run: RunData, pos: np.ndarray) -> np.ndarray | None:
 
 @dataclass
 class Obstacles:
-    points: np.ndarray  # (P, 2)
-    discs: list[tuple[float, float, float]]  # (x, y, radius)
-    destination: tuple[float, float]
+    points: np.ndarray  # (P, dim)
+    discs: list[tuple[tuple[float, ...], float]]  # (centre, radius): spheres in 3D
+    destination: tuple[float, ...]
 
 
 def obstacles(run: RunData) -> Obstacles | None:
     if run.kind != "flocking_obstacles":
         return None
     model = run.scenario.model
-    return Obstacles(np.asarray(model.obstacles, dtype=np.float64).reshape(-1, 2),
-                     [(d.center[0], d.center[1], d.radius) for d in model.discs],
+    return Obstacles(np.asarray(model.obstacles, dtype=np.float64).reshape(-1, run.dimension),
+                     [(tuple(d.center), d.radius) for d in model.discs],
                      tuple(model.destination))
 
 
@@ -128,9 +135,9 @@ def obstacles(run: RunData) -> Obstacles | None:
 class Leaders:
     """M4's virtual leader p(t), its whole path, and (F1) each agent's r_id = p + b_i."""
 
-    leader: np.ndarray  # (2,)
-    path: np.ndarray  # (K, 2) samples of p over the run
-    targets: np.ndarray | None  # (N, 2) r_id(t) for F1, None for F2
+    leader: np.ndarray  # (dim,)
+    path: np.ndarray  # (K, dim) samples of p over the run
+    targets: np.ndarray | None  # (N, dim) r_id(t) for F1, None for F2
 
 
 def leaders(run: RunData, t: float) -> Leaders | None:
@@ -139,9 +146,10 @@ def leaders(run: RunData, t: float) -> Leaders | None:
     model = run.scenario.model
     from flocklab.kernels.models.formation.path import make_path
 
-    obs = run.observables
-    if "leader_x" in obs and len(obs["leader_x"]):
-        start = np.array([obs["leader_x"][0], obs["leader_y"][0]])  # p(0) as the run had it
+    obs, dim = run.observables, run.dimension
+    columns = [f"leader_{c}" for c in "xyz"[:dim]]
+    if all(c in obs and len(obs[c]) for c in columns):
+        start = np.array([obs[c][0] for c in columns])  # p(0) as the run had it
     else:
         start = run.frame(0).position.mean(axis=0)
     path = make_path(model.path, start)
@@ -152,6 +160,6 @@ def leaders(run: RunData, t: float) -> Leaders | None:
         from flocklab.kernels.models.formation.schedule import OffsetSchedule
 
         d = float(run.scenario.neighbours.radius)
-        b = OffsetSchedule(model.formation, model.schedule, run.n_agents, d).at(t)
+        b = OffsetSchedule(model.formation, model.schedule, run.n_agents, d, dim).at(t)
         targets = path.position(t)[None, :] + b
     return Leaders(path.position(t), samples, targets)

@@ -9,7 +9,7 @@ from pathlib import Path
 from .errors import PlottingUnavailable, RenderInputError
 from .figure import new_figure
 from .run_data import RunData
-from .snapshot import Scene, SnapshotOptions, view_limits
+from .snapshot import Scene, SnapshotOptions, View, drawn_points, make_view
 
 MOVIE_FORMATS = (".mp4", ".gif")
 
@@ -60,17 +60,17 @@ def write_movie(run: RunData, out: Path, opts: SnapshotOptions, *, fps: float = 
     return len(frames)
 
 
-def _movie_view(run: RunData, frames: range) -> tuple[float, float, float, float]:
+def _movie_view(run: RunData, frames: range) -> View:
     if run.box is not None:
-        return view_limits(run, run.frame(frames[0]).position)
+        return make_view(run, run.frame(frames[0]).position)
     import numpy as np
 
     from . import geometry
 
-    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    lo, hi = np.full(run.dimension, np.inf), np.full(run.dimension, -np.inf)
     for k in frames:  # one frame at a time: never the whole trajectory in memory
         p = run.frame(k).position
         lo, hi = np.minimum(lo, p.min(axis=0)), np.maximum(hi, p.max(axis=0))
-    corners = np.array([lo, hi])
-    return view_limits(run, corners, None, geometry.obstacles(run),
-                       geometry.leaders(run, run.frame(frames[-1]).time))
+    points = drawn_points(np.array([lo, hi]), None, geometry.obstacles(run),
+                          geometry.leaders(run, run.frame(frames[-1]).time))
+    return make_view(run, points)

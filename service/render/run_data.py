@@ -37,9 +37,23 @@ class Frame:
     index: int
     step: int
     time: float
-    position: np.ndarray  # (N, 2)
-    heading: np.ndarray  # (N,) radians: the recorded heading, else the velocity's angle
-    velocity: np.ndarray | None  # (N, 2) when recorded
+    position: np.ndarray  # (N, dim)
+    # 2D: (N,) radians; 3D: (N, 3) unit vectors. The recorded heading, else the
+    # velocity's direction (the x axis where the velocity is zero, as atan2(0, 0) = 0).
+    heading: np.ndarray
+    velocity: np.ndarray | None  # (N, dim) when recorded
+
+    @property
+    def azimuth(self) -> np.ndarray:
+        """(N,) the heading's angle in the x-y plane: what the colours show."""
+        h = self.heading
+        return h if h.ndim == 1 else np.arctan2(h[:, 1], h[:, 0])
+
+    @property
+    def directions(self) -> np.ndarray:
+        """(N, dim) unit headings."""
+        h = self.heading
+        return np.column_stack([np.cos(h), np.sin(h)]) if h.ndim == 1 else h
 
 
 class RunData:
@@ -54,9 +68,13 @@ class RunData:
             self.doc: dict[str, Any] = json.loads((self.folder / "scenario.json").read_text())
             self.summary: dict[str, Any] = json.loads((self.folder / "summary.json").read_text())
             self.kind: str = self.doc["model"]["kind"]
-            self.n_agents: int = int(self.doc["initial"]["N"])
+            initial = self.doc["initial"]
+            # an explicit initial state has no N: its positions are the agents
+            self.n_agents: int = (int(initial["N"]) if "N" in initial
+                                  else len(initial["positions"]))
             space = self.doc["space"]
             self.box: float | None = float(space["L"]) if space["kind"] == "periodic" else None
+            self.dimension: int = int(space.get("dimension", 2))
             self.name: str = self.doc.get("name") or self.kind
             nb = self.doc.get("neighbours")
             self.radius: float | None = float(nb["radius"]) if nb else None
@@ -160,20 +178,30 @@ class RunData:
             swarm = f["particles/swarm"]
             pos = swarm["position/value"][k]
             vel = swarm["velocity/value"][k] if "velocity" in swarm else None
-            if "heading" in swarm:
-                heading = swarm["heading/value"][k]
-            elif vel is not None:
-                heading = np.arctan2(vel[:, 1], vel[:, 0])
-            else:
-                heading = np.zeros(len(pos))
+            heading = swarm["heading/value"][k] if "heading" in swarm else None
+        if heading is None:
+            heading = _direction(vel) if vel is not None else _direction(np.zeros_like(pos))
         return Frame(k, int(steps[k]), float(times[k]), pos, heading, vel)
 
     def positions(self, start: int, stop: int, stride: int = 1,
                   agents: np.ndarray | slice = slice(None)) -> np.ndarray:
-        """Positions of frames start:stop:stride, (F, n, 2), for trails."""
+        """Positions of frames start:stop:stride, (F, n, dim), for trails."""
         with h5py.File(self.trajectory_path, "r") as f:
             value = f["particles/swarm/position/value"]
             return np.stack([value[k][agents] for k in range(start, stop, stride)])
+
+
+def _direction(v: np.ndarray) -> np.ndarray:
+    """A frame's headings from its velocities: the angle in 2D, the unit vector in 3D
+    (the x axis for a zero velocity in both)."""
+    if v.shape[1] == 2:
+        return np.arctan2(v[:, 1], v[:, 0])
+    speed = np.sqrt((v * v).sum(axis=1))
+    out = np.zeros_like(v)
+    out[:, 0] = 1.0
+    moving = speed > 0
+    out[moving] = v[moving] / speed[moving, None]
+    return out
 
 
 def _number(s: str) -> float:

@@ -1,4 +1,4 @@
-"""One frame drawn as the papers draw it.
+"""One frame drawn as the papers draw it, in the plane or in 3D space.
 
 Small N: each agent an arrow along its heading (Vicsek) or its velocity (the double
 integrators and M4, length relative to the fastest agent of the frame), coloured by
@@ -6,6 +6,13 @@ heading; the interaction edges; obstacles and the destination (M3); the virtual 
 its path and the formation offsets b_i to each agent's virtual leader r_id (M4); the
 periodic box. Large N (above `FIELD_ABOVE` agents, where arrows are a blur): a density or
 local-polarization field on a grid, with the mean heading as a coarse arrow field.
+
+3D runs are drawn through the fixed orthographic camera of `projection`: every point,
+segment and vector above is projected, agents are coloured by the azimuth of their
+heading and shaded by depth (far ones first, paler, smaller), the periodic cube or the
+box around everything drawn is a wireframe with its hidden edges dashed, M3's spheres
+are their projected discs, and a field is the density or polarization seen through the
+depth.
 """
 
 from __future__ import annotations
@@ -18,13 +25,13 @@ import numpy as np
 
 from . import geometry
 from .errors import RenderInputError
+from .fields import field_artists, field_data
 from .figure import check_size
+from .projection import Camera, box_corners, box_edges, fogged, marker_scale, nearness
 from .run_data import Frame, RunData
 
 FIELD_ABOVE = 5000  # agents: arrows beyond this are unreadable at any picture size
 EDGES_MAX_AGENTS = 200  # edges drawn by default up to here (the papers' N; denser is a blur)
-FIELD_BINS = 160  # grid cells along the longer side of a field picture
-COARSE_ARROWS = 20  # mean-heading arrows along the longer side over a field
 Field = Literal["auto", "arrows", "density", "polarization"]
 FIELDS: tuple[str, ...] = ("auto", "arrows", "density", "polarization")
 
@@ -63,9 +70,21 @@ class SnapshotInfo:
     trails_drawn: int
 
 
+@dataclass(frozen=True)
+class View:
+    """What a picture spans: the world box lo..hi (the periodic box, or everything drawn
+    with a margin), the screen limits around its picture, and in 3D its depth range."""
+
+    lo: np.ndarray  # (dim,)
+    hi: np.ndarray
+    limits: tuple[float, float, float, float]  # x0, x1, y0, y1 on the screen
+    far: float = 0.0  # the farthest and nearest depth of the box (3D)
+    near: float = 0.0
+
+
 def draw_snapshot(fig: Any, run: RunData, k: int, opts: SnapshotOptions,
-                  view: tuple[float, float, float, float] | None = None) -> SnapshotInfo:
-    """Draw frame k onto `fig` (cleared first). `view` fixes the limits."""
+                  view: View | None = None) -> SnapshotInfo:
+    """Draw frame k onto `fig` (cleared first). `view` fixes what the picture spans."""
     return Scene(fig, run, opts, view).draw(k)
 
 
@@ -75,9 +94,10 @@ class Scene:
     times cheaper than drawing the axes anew."""
 
     def __init__(self, fig: Any, run: RunData, opts: SnapshotOptions,
-                 view: tuple[float, float, float, float] | None = None):
+                 view: View | None = None):
         opts.check()
         self.fig, self.run, self.opts, self.view = fig, run, opts, view
+        self.camera = Camera(run.dimension)
         self.mode = opts.field
         if self.mode == "auto":
             self.mode = "density" if run.n_agents > FIELD_ABOVE else "arrows"
@@ -86,42 +106,55 @@ class Scene:
                                    "or field=arrows)", loc="trails")
         self.want_edges = self.mode == "arrows" and (opts.edges if opts.edges is not None else (
             run.n_agents <= EDGES_MAX_AGENTS and run.kind != "formation"))
+        n = run.n_agents
+        self.dot = 18 if n <= 50 else 6 if n <= 1000 else 2  # marker area, points^2
         self.artists: dict[str, Any] = {}  # everything that changes from frame to frame
         self._background: Any = None
 
     def draw(self, k: int) -> SnapshotInfo:
-        run, opts = self.run, self.opts
+        run, opts, cam = self.run, self.opts, self.camera
         fr = run.frame(k)
         obst = geometry.obstacles(run) if opts.overlays else None
         lead = geometry.leaders(run, fr.time) if opts.overlays else None
         trail_pos = _trails(run, k, opts.trails) if opts.trails is not None else None
         if self.view is None:
-            self.view = view_limits(run, fr.position, trail_pos, obst, lead)
+            self.view = make_view(run, drawn_points(fr.position, trail_pos, obst, lead))
         first = not self.artists
         if first:
             self._build(obst)
         a = self.artists
         edges_drawn = trails_drawn = 0
         if self.mode == "arrows":
+            colours = _hue(fr.azimuth)
+            near = None
+            if cam.is_3d:
+                near = nearness(cam.depth(fr.position), self.view.far, self.view.near)
+                colours = fogged(colours, near)
             if trail_pos is not None:
-                trails_drawn = len(_trail_paths(trail_pos, run.box))
-                a["trails"].set_segments(_trail_paths(trail_pos, run.box))
-                a["trails"].set_color(_hue(fr.heading))
+                paths = _trail_paths(trail_pos, run.box)
+                trails_drawn = len(paths)
+                a["trails"].set_segments(cam.screen(paths))
+                a["trails"].set_color(colours)
             if self.want_edges:
                 edges = geometry.interaction_edges(run, fr.position)
                 if edges is not None:
                     edges_drawn = len(edges)
-                    a["edges"].set_data(*_polyline(_edge_segments(fr.position, edges,
-                                                                  run.box)))
-            pos, u, v, colours = _arrow_data(run, fr, self.view)
+                    a["edges"].set_data(*_polyline(cam.screen(
+                        _edge_segments(fr.position, edges, run.box))))
+            pos, uv = _arrow_data(run, fr, self.view, cam)
+            if near is not None:  # far agents first: the near ones are drawn over them
+                order = np.argsort(near, kind="stable")
+                pos, uv, colours = pos[order], uv[order], colours[order]
+                a["dots"].set_sizes(self.dot * marker_scale(near[order]))
             a["dots"].set_offsets(pos)
             a["dots"].set_color(colours)
             a["arrows"].set_offsets(pos)
-            a["arrows"].set_UVC(u, v)
+            a["arrows"].set_UVC(uv[:, 0], uv[:, 1])
             a["arrows"].set_color(colours)
             agents = len(a["arrows"].U)
         else:
-            image, coarse = _field_data(fr, self.mode, self.view)
+            image, coarse = field_data(cam.screen(fr.position), fr.directions, self.mode,
+                                       self.view.limits, cam)
             a["image"].set_data(image.T)
             if first and self.mode == "density" and image.count():
                 lo, hi = float(image.min()), float(image.max())
@@ -129,14 +162,14 @@ class Scene:
             a["coarse"].set_UVC(*coarse)
             agents = len(fr.position)
         if lead is not None:
-            a["leader"].set_offsets(lead.leader[None, :])
+            leader = cam.screen(lead.leader)
+            a["leader"].set_offsets(leader[None, :])
             if lead.targets is not None:
-                a["targets"].set_offsets(lead.targets)
+                targets = cam.screen(lead.targets)
+                a["targets"].set_offsets(targets)
                 a["offsets"].set_segments(np.stack(
-                    [np.repeat(lead.leader[None, :], len(lead.targets), 0), lead.targets],
-                    axis=1))
-        name = run.name
-        a["title"].set_text(f"{name}: N = {run.n_agents}, t = {fr.time:.4g} "
+                    [np.repeat(leader[None, :], len(targets), 0), targets], axis=1))
+        a["title"].set_text(f"{run.name}: N = {run.n_agents}, t = {fr.time:.4g} "
                             f"(step {fr.step})")
         return SnapshotInfo(k, fr.step, fr.time, self.mode, agents, edges_drawn, trails_drawn)
 
@@ -157,122 +190,197 @@ class Scene:
 
     def _build(self, obst: geometry.Obstacles | None) -> None:
         from matplotlib.collections import LineCollection
-        from matplotlib.ticker import MaxNLocator
 
-        fig, run, a = self.fig, self.run, self.artists
+        fig, run, a, cam = self.fig, self.run, self.artists, self.camera
         fig.clear()
         ax = fig.add_axes((0.1, 0.08, 0.7, 0.84))
         cax = fig.add_axes((0.82, 0.08, 0.025, 0.84))
-        x0, x1, y0, y1 = self.view
         n = run.n_agents
         if self.mode == "arrows":
-            _heading_colourbar(cax)
+            _heading_colourbar(cax, "heading azimuth (rad)" if cam.is_3d
+                               else "heading (rad)")
             if self.opts.trails is not None:
                 a["trails"] = ax.add_collection(LineCollection(
                     [], linewidths=0.8, alpha=0.55, zorder=1))
             if self.want_edges:
                 # one line broken by NaNs, not a LineCollection: thousands of edges would
                 # cost a Path object each (most of a 10^3-agent snapshot's drawing time)
-                (a["edges"],) = ax.plot([], [], c="0.55", lw=0.6, zorder=2, alpha=0.8)
-            dot = 18 if n <= 50 else 6 if n <= 1000 else 2
+                # (lighter in 3D, where the depth adds crossings)
+                (a["edges"],) = ax.plot([], [], c="0.55", lw=0.4 if cam.is_3d else 0.6,
+                                        zorder=2, alpha=0.45 if cam.is_3d else 0.8)
             zeros = np.zeros(n)
-            a["dots"] = ax.scatter(zeros, zeros, s=dot, zorder=3, linewidths=0)
+            a["dots"] = ax.scatter(zeros, zeros, s=self.dot, zorder=3, linewidths=0)
             a["arrows"] = ax.quiver(zeros, zeros, zeros, zeros, angles="xy",
                                     scale_units="xy", scale=1.0,
                                     width=0.004 if n <= 50 else 0.0025, headwidth=3.5,
                                     headlength=4, zorder=4)
         else:
-            a["image"], a["coarse"] = _field_artists(ax, cax, self.mode, self.view)
+            a["image"], a["coarse"] = field_artists(ax, cax, self.mode, self.view.limits,
+                                                    cam)
         if obst is not None:
-            _draw_obstacles(ax, obst)
+            _draw_obstacles(ax, obst, cam)
         if self.opts.overlays and run.kind == "formation":
-            lead = geometry.leaders(run, 0.0)
-            assert lead is not None
-            ax.plot(lead.path[:, 0], lead.path[:, 1], ls="--", lw=1.0, c="0.35", zorder=1,
-                    label="leader path p(t)")
-            if lead.targets is not None:
-                a["offsets"] = ax.add_collection(LineCollection(
-                    [], colors="tab:blue", linewidths=0.6, linestyles=":", zorder=2))
-                a["targets"] = ax.scatter(lead.targets[:, 0], lead.targets[:, 1], s=40,
-                                          marker="s", fc="none", ec="tab:blue", zorder=3,
-                                          label="virtual leaders r_id = p + b_i")
-            a["leader"] = ax.scatter([lead.leader[0]], [lead.leader[1]], s=160, marker="*",
-                                     c="gold", ec="k", zorder=6, label="p(t)")
-            ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
-        if run.box is not None:
-            from matplotlib.patches import Rectangle
-
-            ax.add_patch(Rectangle((0, 0), run.box, run.box, fill=False, lw=1.2, ec="0.2",
-                                   zorder=5))
+            self._build_leaders(ax)
+        x0, x1, y0, y1 = self.view.limits
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
-        # At most 6 labelled ticks an axis (matplotlib's default draws up to 9 here): the
-        # tick labels' layout was a fifth of a 10^3-agent snapshot's drawing.
-        ax.xaxis.set_major_locator(MaxNLocator(5))
-        ax.yaxis.set_major_locator(MaxNLocator(5))
         ax.set_aspect("equal", adjustable="box")
-        ax.set_xlabel("x")
-        ax.set_ylabel("y")
+        if cam.is_3d:
+            _wireframe(ax, self.view, cam, "0.85" if self.mode == "density" else "0.2",
+                       "paler and smaller = farther" if self.mode == "arrows"
+                       else "each cell: the agents along its line of sight")
+        else:
+            _plane_frame(ax, run.box)
         a["title"] = ax.set_title("", fontsize=10)
 
+    def _build_leaders(self, ax: Any) -> None:
+        """M4's leader path p(t), the leader now and (F1) the virtual leaders r_id with
+        the offsets b_i from p(t) to them (moved frame to frame)."""
+        from matplotlib.collections import LineCollection
 
-def view_limits(run: RunData, pos: np.ndarray, trails: np.ndarray | None = None,
-                obst: geometry.Obstacles | None = None, lead: geometry.Leaders | None = None
-                ) -> tuple[float, float, float, float]:
-    """The box, or on the plane everything drawn plus a margin, square."""
-    if run.box is not None:
-        pad = 0.02 * run.box
-        return -pad, run.box + pad, -pad, run.box + pad
+        a, cam = self.artists, self.camera
+        lead = geometry.leaders(self.run, 0.0)
+        assert lead is not None
+        path = cam.screen(lead.path)
+        ax.plot(path[:, 0], path[:, 1], ls="--", lw=1.0, c="0.35", zorder=1,
+                label="leader path p(t)")
+        if lead.targets is not None:
+            a["offsets"] = ax.add_collection(LineCollection(
+                [], colors="tab:blue", linewidths=0.6, linestyles=":", zorder=2))
+            targets = cam.screen(lead.targets)
+            a["targets"] = ax.scatter(targets[:, 0], targets[:, 1], s=40, marker="s",
+                                      fc="none", ec="tab:blue", zorder=3,
+                                      label="virtual leaders r_id = p + b_i")
+        leader = cam.screen(lead.leader)
+        a["leader"] = ax.scatter([leader[0]], [leader[1]], s=160, marker="*", c="gold",
+                                 ec="k", zorder=6, label="p(t)")
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
+
+
+def drawn_points(pos: np.ndarray, trails: np.ndarray | None = None,
+                 obst: geometry.Obstacles | None = None,
+                 lead: geometry.Leaders | None = None) -> np.ndarray:
+    """Every point a picture of these must show, (K, dim), in world coordinates."""
+    dim = pos.shape[1]
     pts = [pos]
     if trails is not None:
-        pts.append(trails.reshape(-1, 2))
+        pts.append(trails.reshape(-1, dim))
     if obst is not None:
         pts += [obst.points, np.array([obst.destination])]
-        pts += [np.array([[x - r, y - r], [x + r, y + r]]) for x, y, r in obst.discs]
+        pts += [np.array([np.subtract(c, r), np.add(c, r)]) for c, r in obst.discs]
     if lead is not None:
         pts += [lead.path, lead.leader[None, :]]
         if lead.targets is not None:
             pts.append(lead.targets)
-    allp = np.vstack([p for p in pts if len(p)])
-    allp = allp[np.all(np.isfinite(allp), axis=1)]
-    lo, hi = allp.min(axis=0), allp.max(axis=0)
-    c, half = (lo + hi) / 2, max(float((hi - lo).max()) / 2, 1e-9) * 1.15
-    return c[0] - half, c[0] + half, c[1] - half, c[1] + half
+    allp = np.vstack([p.reshape(-1, dim) for p in pts if len(p)])
+    return allp[np.all(np.isfinite(allp), axis=1)]
 
 
-def _hue(heading: np.ndarray) -> np.ndarray:
-    """RGBA colours of headings on the cyclic hsv map, -π .. π."""
+def make_view(run: RunData, points: np.ndarray) -> View:
+    """The periodic box, or on the plane (in space) the box around `points`; its picture
+    padded to a square."""
+    dim, cam = run.dimension, Camera(run.dimension)
+    if run.box is not None:
+        lo, hi = np.zeros(dim), np.full(dim, run.box)
+        if dim == 2:
+            pad = 0.02 * run.box
+            return View(lo, hi, (-pad, run.box + pad, -pad, run.box + pad))
+    else:
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        if dim == 3:  # the wireframe a little away from the agents
+            margin = max(float((hi - lo).max()) * 0.04, 1e-9)
+            lo, hi = lo - margin, hi + margin
+    if dim == 2:
+        corners, grow = np.array([lo, hi]), 1.15
+    else:
+        corners, grow = cam.screen(box_corners(lo, hi)), 1.08
+    slo, shi = corners.min(axis=0), corners.max(axis=0)
+    c, half = (slo + shi) / 2, max(float((shi - slo).max()) / 2, 1e-9) * grow
+    limits = (c[0] - half, c[0] + half, c[1] - half, c[1] + half)
+    if dim == 2:
+        return View(lo, hi, limits)
+    depth = cam.depth(box_corners(lo, hi))
+    return View(lo, hi, limits, float(depth.min()), float(depth.max()))
+
+
+def _plane_frame(ax: Any, box: float | None) -> None:
+    """The periodic box and the x, y axes of a 2D picture."""
+    from matplotlib.ticker import MaxNLocator
+
+    if box is not None:
+        from matplotlib.patches import Rectangle
+
+        ax.add_patch(Rectangle((0, 0), box, box, fill=False, lw=1.2, ec="0.2", zorder=5))
+    # At most 6 labelled ticks an axis (matplotlib's default draws up to 9 here): the
+    # tick labels' layout was a fifth of a 10^3-agent snapshot's drawing.
+    ax.xaxis.set_major_locator(MaxNLocator(5))
+    ax.yaxis.set_major_locator(MaxNLocator(5))
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+
+
+def _wireframe(ax: Any, view: View, cam: Camera, colour: str, depth_note: str) -> None:
+    """The box lo..hi of a 3D picture: its visible edges solid, hidden ones dashed, each
+    axis named with its range beside one edge; the screen axes carry no ticks (screen
+    coordinates mean nothing to a reader), the camera is said under the picture."""
+    segments, hidden = box_edges(view.lo, view.hi, cam)
+    for seg, back in zip(cam.screen(segments), hidden, strict=True):
+        ax.plot(seg[:, 0], seg[:, 1], c=colour, lw=0.9, ls=":" if back else "-",
+                zorder=5 if not back else 0.5)
+    lo, hi = view.lo, view.hi
+    mid = (lo + hi) / 2
+    # an edge along each axis on the box's outline (for the default camera: the front
+    # bottom edge along x, the right bottom edge along y, the left front edge along z)
+    for axis, at in (("x", [mid[0], lo[1], lo[2]]), ("y", [hi[0], mid[1], lo[2]]),
+                     ("z", [lo[0], lo[1], mid[2]])):
+        i = "xyz".index(axis)
+        x, y = cam.screen(np.array(at))
+        ax.annotate(f"{axis} {lo[i]:.3g} … {hi[i]:.3g}", (x, y),
+                    xytext=(0, -5) if i < 2 else (-5, 0), textcoords="offset points",
+                    fontsize=8, color=colour, rotation=0 if i < 2 else 90,
+                    ha="center" if i < 2 else "right", va="top" if i < 2 else "center",
+                    zorder=6)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for spine in ax.spines.values():
+        spine.set_visible(False)
+    ax.text(0.5, -0.03, f"{cam.describe()}; {depth_note}", transform=ax.transAxes,
+            ha="center", va="top", fontsize=8, color="0.3")
+
+
+def _hue(angle: np.ndarray) -> np.ndarray:
+    """RGBA colours of heading angles on the cyclic hsv map, -π .. π."""
     from matplotlib import colormaps
 
-    return colormaps["hsv"](np.mod(heading + math.pi, 2 * math.pi) / (2 * math.pi))
+    return colormaps["hsv"](np.mod(angle + math.pi, 2 * math.pi) / (2 * math.pi))
 
 
-def _heading_colourbar(cax: Any) -> None:
+def _heading_colourbar(cax: Any, label: str) -> None:
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
     bar = cax.figure.colorbar(ScalarMappable(Normalize(-math.pi, math.pi),
                                              colormaps["hsv"]), cax=cax)
-    bar.set_label("heading (rad)")
+    bar.set_label(label)
     bar.set_ticks([-math.pi, -math.pi / 2, 0, math.pi / 2, math.pi],
                   labels=["−π", "−π/2", "0", "π/2", "π"])
 
 
-def _arrow_data(run: RunData, fr: Frame, view: tuple[float, float, float, float]
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Positions, arrow components and colours: heading arrows of a fixed length, or
-    velocity arrows scaled by the run's top speed."""
-    width = view[1] - view[0]
-    pos, n = fr.position, len(fr.position)
+def _arrow_data(run: RunData, fr: Frame, view: View, cam: Camera
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The agents' pictures (N, 2) and their arrows (N, 2): heading arrows of a fixed
+    length, or velocity arrows scaled by the run's top speed, as seen on the screen (a
+    3D arrow pointing at the viewer is short)."""
+    width = view.limits[1] - view.limits[0]
+    n = len(fr.position)
     length = width * (0.035 if n <= 50 else 0.02 if n <= 1000 else 0.012)
     if fr.velocity is not None:
         top = _top_speed(run, fr)
-        scale = length * 1.6 / top if top > 0 else 0.0
-        u, v = fr.velocity[:, 0] * scale, fr.velocity[:, 1] * scale
+        arrows = fr.velocity * (length * 1.6 / top if top > 0 else 0.0)
     else:
-        u, v = length * np.cos(fr.heading), length * np.sin(fr.heading)
-    return pos, u, v, _hue(fr.heading)
+        arrows = length * fr.directions
+    return cam.screen(fr.position), cam.screen(arrows)
 
 
 def _top_speed(run: RunData, fr: Frame) -> float:
@@ -281,14 +389,15 @@ def _top_speed(run: RunData, fr: Frame) -> float:
     observed = run.observables.get("speed_max")
     if observed is not None and np.isfinite(observed).any():
         return float(np.nanmax(observed))
-    speed = np.hypot(fr.velocity[:, 0], fr.velocity[:, 1]) if fr.velocity is not None else []
-    return float(np.max(speed)) if len(speed) else 0.0
+    if fr.velocity is None or not len(fr.velocity):
+        return 0.0
+    return float(np.sqrt((fr.velocity * fr.velocity).sum(axis=1)).max())
 
 
 def _edge_segments(pos: np.ndarray, edges: np.ndarray, box: float | None) -> np.ndarray:
-    """(S, 2, 2) segments; an edge across the seam of the box is drawn at both ends."""
+    """(S, 2, dim) segments; an edge across the seam of the box is drawn at both ends."""
     if len(edges) == 0:
-        return np.zeros((0, 2, 2))
+        return np.zeros((0, 2, pos.shape[1]))
     a, b = pos[edges[:, 0]], pos[edges[:, 1]]
     d = geometry.displacement(a, b, box)
     segs = [np.stack([a, a + d], axis=1)]
@@ -310,7 +419,7 @@ def _trails(run: RunData, k: int, window: int) -> np.ndarray:
 
 
 def _trail_paths(trails: np.ndarray, box: float | None) -> np.ndarray:
-    """(n, F, 2) paths, broken (NaN) where an agent wraps round the periodic box."""
+    """(n, F, dim) paths, broken (NaN) where an agent wraps round the periodic box."""
     paths = np.transpose(trails, (1, 0, 2)).copy()
     if box is not None and paths.shape[1] > 1:
         jump = np.any(np.abs(np.diff(paths, axis=1)) > box / 2, axis=2)
@@ -318,70 +427,19 @@ def _trail_paths(trails: np.ndarray, box: float | None) -> np.ndarray:
     return paths
 
 
-def _field_artists(ax: Any, cax: Any, mode: str, view: tuple[float, float, float, float]
-                   ) -> tuple[Any, Any]:
-    from matplotlib.colors import LogNorm
-
-    x0, x1, y0, y1 = view
-    blank = np.ma.masked_all((FIELD_BINS, FIELD_BINS))
-    if mode == "density":
-        im = ax.imshow(blank, origin="lower", extent=(x0, x1, y0, y1), cmap="magma",
-                       norm=LogNorm(1.0, 10.0), interpolation="nearest", aspect="auto")
-        label = "agents per unit area"
-    else:
-        im = ax.imshow(blank, origin="lower", extent=(x0, x1, y0, y1), cmap="viridis",
-                       vmin=0, vmax=1, interpolation="nearest", aspect="auto")
-        label = "local polarization"
-    cax.figure.colorbar(im, cax=cax).set_label(label)
-    # empty cells show the background: black (no density) under white arrows, or grey
-    # (no polarization defined) under black arrows
-    ax.set_facecolor("black" if mode == "density" else "0.82")
-    m = COARSE_ARROWS
-    xe, ye = np.linspace(x0, x1, m + 1), np.linspace(y0, y1, m + 1)
-    xc, yc = np.meshgrid((xe[:-1] + xe[1:]) / 2, (ye[:-1] + ye[1:]) / 2, indexing="ij")
-    zeros = np.zeros(m * m)
-    coarse = ax.quiver(xc.ravel(), yc.ravel(), zeros, zeros,
-                       color="white" if mode == "density" else "black", angles="xy",
-                       scale_units="xy", scale=1.0, width=0.003, alpha=0.9, zorder=4,
-                       minlength=0)  # an empty cell draws nothing, not a dot
-    return im, coarse
-
-
-def _field_data(fr: Frame, mode: str, view: tuple[float, float, float, float]
-                ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
-    """The density (agents per unit area) or local polarization on FIELD_BINS cells, and
-    the mean heading on a COARSE_ARROWS grid (zero where no agent is)."""
-    x0, x1, y0, y1 = view
-    pos, extent = fr.position, [[x0, x1], [y0, y1]]
-    c, s = np.cos(fr.heading), np.sin(fr.heading)
-    counts, _, _ = np.histogram2d(pos[:, 0], pos[:, 1], bins=FIELD_BINS, range=extent)
-    if mode == "density":
-        cell = ((x1 - x0) / FIELD_BINS) * ((y1 - y0) / FIELD_BINS)
-        image = np.ma.masked_equal(counts, 0) / cell
-    else:
-        sc, _, _ = np.histogram2d(pos[:, 0], pos[:, 1], bins=FIELD_BINS, range=extent,
-                                  weights=c)
-        ss, _, _ = np.histogram2d(pos[:, 0], pos[:, 1], bins=FIELD_BINS, range=extent,
-                                  weights=s)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            image = np.ma.masked_invalid(np.hypot(sc, ss) / counts)
-    m = COARSE_ARROWS
-    cc, _, _ = np.histogram2d(pos[:, 0], pos[:, 1], bins=m, range=extent)
-    mc, _, _ = np.histogram2d(pos[:, 0], pos[:, 1], bins=m, range=extent, weights=c)
-    ms, _, _ = np.histogram2d(pos[:, 0], pos[:, 1], bins=m, range=extent, weights=s)
-    step = (x1 - x0) / m * 0.8
-    norm = np.maximum(cc, 1)
-    return image, ((mc / norm * step).ravel(), (ms / norm * step).ravel())
-
-
-def _draw_obstacles(ax: Any, obst: geometry.Obstacles) -> None:
+def _draw_obstacles(ax: Any, obst: geometry.Obstacles, cam: Camera) -> None:
+    """M3's point obstacles, its discs (spheres in 3D: their projected discs, seen
+    through) and the destination."""
     from matplotlib.patches import Circle
 
     if len(obst.points):
-        ax.scatter(obst.points[:, 0], obst.points[:, 1], s=14, marker="o", c="0.15",
-                   zorder=3, label="obstacles")
-    for x, y, r in obst.discs:
-        ax.add_patch(Circle((x, y), r, fc="0.6", ec="0.15", zorder=2))
-    ax.scatter([obst.destination[0]], [obst.destination[1]], s=160, marker="*", c="red",
-               ec="k", zorder=6, label="destination")
+        pts = cam.screen(obst.points)
+        ax.scatter(pts[:, 0], pts[:, 1], s=14, marker="o", c="0.15", zorder=3,
+                   label="obstacles")
+    for centre, r in obst.discs:
+        ax.add_patch(Circle(tuple(cam.screen(np.asarray(centre))), r, fc="0.6", ec="0.15",
+                            alpha=0.45 if cam.is_3d else 1.0, zorder=2))
+    dest = cam.screen(np.asarray(obst.destination))
+    ax.scatter([dest[0]], [dest[1]], s=160, marker="*", c="red", ec="k", zorder=6,
+               label="destination")
     ax.legend(loc="upper right", fontsize=8, framealpha=0.8)

@@ -1,5 +1,6 @@
 """Real runs of every model family, written by `service.execute.execute_to_dir`, shared
-by the render tests (small N, a few hundred steps, plus one N = 10^5 Vicsek frame)."""
+by the render tests (small N, a few hundred steps, plus one N = 10^5 Vicsek frame), in the
+plane and in 3D."""
 
 from __future__ import annotations
 
@@ -22,6 +23,26 @@ FAMILIES: dict[str, tuple[str, dict[str, Any]]] = {
     "flocking_obstacles": ("tanner-obstacles", {"time": {"steps": 1500}}),
     "formation_F1": ("xi-abed-sim1", {"time": {"steps": 1000}, "recording": {"every": 50}}),
     "formation_F2": ("xi-abed-sim3", {"time": {"steps": 1000}, "recording": {"every": 50}}),
+}
+
+
+# The same families in 3D (space.dimension = 3): the 3D presets shortened, the 2D presets
+# lifted to 3D, and M3 with point and sphere obstacles (tests/test_flocking_3d.py's).
+FAMILIES_3D: dict[str, tuple[str, dict[str, Any]]] = {
+    "vicsek": ("vicsek-3d", {"initial": {"N": 500}, "space": {"L": 5.0},
+                             "time": {"steps": 60}, "recording": {"every": 5}}),
+    "flocking_fixed": ("tjp-fixed", {
+        "space": {"dimension": 3},
+        "initial": {"N": 12, "region": {"low": [-2.5, -2.5, -2.5], "high": [2.5, 2.5, 2.5]}},
+        "time": {"steps": 600}, "convergence": {"tolerance": 0.5}}),
+    "flocking_switching": ("tjp-switching-3d", {"initial": {"N": 64},
+                                                "time": {"steps": 400}}),
+    "formation_F1": ("xi-abed-f1-3d", {"time": {"steps": 1000}, "recording": {"every": 50}}),
+    "formation_F2": ("xi-abed-sim3", {
+        "space": {"dimension": 3},
+        "model": {"path": {"target": [-40.0, -40.0, 20.0]}},
+        "initial": {"N": 60, "region": {"low": [0.0, 0.0, 0.0], "high": [50.0, 50.0, 50.0]}},
+        "time": {"steps": 1000}, "recording": {"every": 50}}),
 }
 
 
@@ -48,6 +69,17 @@ def runs(tmp_path_factory: pytest.TempPathFactory, taichi_cpu) -> dict[str, Path
     root = tmp_path_factory.mktemp("render-runs")
     return {fam: run_to(root / fam, preset_scenario(name, over))
             for fam, (name, over) in FAMILIES.items()}
+
+
+@pytest.fixture(scope="session")
+def runs_3d(tmp_path_factory: pytest.TempPathFactory, taichi_cpu) -> dict[str, Path]:
+    from tests.test_flocking_3d import m3_scenario
+
+    root = tmp_path_factory.mktemp("render-runs-3d")
+    out = {fam: run_to(root / fam, preset_scenario(name, over))
+           for fam, (name, over) in FAMILIES_3D.items()}
+    out["flocking_obstacles"] = run_to(root / "flocking_obstacles", m3_scenario(steps=150))
+    return out
 
 
 @pytest.fixture(scope="session")

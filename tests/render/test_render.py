@@ -191,16 +191,21 @@ def test_trajectory_frames_are_in_agent_order(runs):
                                       run.frame(0).position)
 
 
-def test_movie_frames_match_full_drawings(runs):
+@pytest.mark.parametrize("runs_fixture, family, frames", [
+    ("runs", "formation_F1", (0, 5, -1)),
+    ("runs_3d", "flocking_obstacles", (0, 70, -1)),  # depth order and fog change per frame
+])
+def test_movie_frames_match_full_drawings(request, runs_fixture, family, frames):
     """Blitting (axes drawn once, moving artists per frame) gives the full drawing."""
     from flocklab.service.render.movie import _movie_view
     from flocklab.service.render.snapshot import Scene
 
-    run = RunData(runs["formation_F1"])
+    run = RunData(request.getfixturevalue(runs_fixture)[family])
     opts = SnapshotOptions(320, 320, trails=2)
     view = _movie_view(run, range(run.n_frames))
     scene = Scene(new_figure(320, 320), run, opts, view)
-    for k in (0, 5, run.n_frames - 1):
+    for k in frames:
+        k %= run.n_frames
         scene.draw(k)
         blitted = scene.rgb()
         fig = new_figure(320, 320)

@@ -60,6 +60,36 @@ def test_observables_and_movie(http, done_job):
     assert r.headers["content-type"] == "video/mp4" and r.content[4:8] == b"ftyp"
 
 
+@pytest.fixture(scope="module")
+def done_job_3d(server) -> str:
+    """A finished 3D Vicsek job (the periodic cube)."""
+    sc = scenario(n=80, steps=30, every=5)
+    sc["space"]["dimension"] = 3
+    with httpx.Client(base_url=server.url, timeout=30) as http:
+        job = submit(http, sc)
+        assert wait_for(http, job["id"])["status"] == "succeeded"
+    return job["id"]
+
+
+def test_a_3d_job_is_drawn(server, http, done_job_3d):
+    """A 3D job's snapshot (every agent through the 3D camera), movie and the client's
+    job.snapshot(), as for a 2D job."""
+    base = f"/v1/jobs/{done_job_3d}/render"
+    r = http.get(f"{base}/snapshot.png", params={"width": 300, "height": 260, "trails": 2},
+                 timeout=120)
+    assert r.status_code == 200, r.text
+    img = _image(r.content)
+    assert img.shape[:2] == (260, 300) and img[..., :3].std() > 10
+    assert (img[..., :3] < 235).any(axis=2).mean() > 0.03
+    r = http.get(f"{base}/movie.mp4", params={"width": 160, "height": 160, "fps": 5},
+                 timeout=300)
+    assert r.status_code == 200, r.text
+    assert r.headers["content-type"] == "video/mp4" and r.content[4:8] == b"ftyp"
+    with clients.Client(server.url) as c:
+        content = c.job(done_job_3d).snapshot(width=200, height=200, field="density")
+        assert _image(content).shape[:2] == (200, 200)
+
+
 def test_render_errors_are_problems(http, done_job, server):
     base = f"/v1/jobs/{done_job}/render"
     body = assert_problem(http.get(f"{base}/snapshot.png", params={"frame": 999},
