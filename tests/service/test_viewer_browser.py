@@ -256,6 +256,46 @@ def test_playback_rate_at_ten_thousand_agents(browser, make_server, capsys):
     assert not w.errors, w.errors
 
 
+def test_playback_of_a_3d_job(browser, server):
+    """A 3D job plays back through the renderer's camera: each agent where
+    `service.render.projection.Camera` puts it, in depth bands (far ones paler), the
+    wireframe and the agents on the canvas, no console errors."""
+    import numpy as np
+
+    from flocklab.service.render.projection import Camera
+
+    sc = scenario(n=300, steps=40, every=4)
+    sc["space"]["dimension"] = 3
+    with httpx.Client(base_url=server.url, timeout=60) as http:
+        job = submit(http, sc)
+        assert wait_for(http, job["id"])["status"] == "succeeded"
+        first = http.get(f"/v1/jobs/{job['id']}/trajectory",
+                         params={"format": "json", "stop": 1, "arrays": "position"}).json()
+    w = Watched(browser, server.url + "/")
+    w.page.evaluate("(id) => window.flocklabViewer.selectJob(id)", job["id"])
+    w.page.wait_for_selector("#play:not([disabled])", timeout=120_000)
+    player = w.page.evaluate("""() => {
+        const pl = window.flocklabViewer.state.player;
+        const bands = new Set(Array.from(pl.bucket.slice(0, pl.n), (b) => Math.floor(b / 24)));
+        return { dim: pl.dim, n: pl.n, frames: pl.frames, bands: bands.size,
+                 sx: Array.from(pl.sx.slice(0, pl.n)), sy: Array.from(pl.sy.slice(0, pl.n)) };
+    }""")
+    assert (player["dim"], player["n"], player["frames"]) == (3, 300, 11)
+    expected = Camera(3).screen(np.array(first["position"][0]))
+    np.testing.assert_allclose(np.column_stack([player["sx"], player["sy"]]), expected,
+                               atol=1e-4)
+    assert player["bands"] >= 3  # the cube spans the depth bands
+    assert canvas_ink(w.page) > 0.002
+    w.page.click("#play")
+    w.page.wait_for_function("() => Number(document.querySelector('#scrub').value) > 3")
+    w.page.click("#play")
+    assert "3D" in w.page.text_content("#frame-info")
+    if DOCS_IMG:
+        w.page.locator("#player").screenshot(path=str(Path(DOCS_IMG) / "viewer_3d.png"))
+    assert not w.errors, w.errors
+    assert w.hosts == {"127.0.0.1"}, w.hosts
+
+
 def test_sweep_list_follows_a_sweep_submitted_from_the_page(browser, server):
     """The form's scenario swept over model.eta from the page: the sweep list shows it
     running, then ended with its runs counted, without a reload (the event stream and

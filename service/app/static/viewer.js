@@ -477,9 +477,25 @@ async function loadResults(job) {
 
 // -- playback -----------------------------------------------------------------------------
 
+// 3D jobs are seen through the renderer's camera (service/render/projection.py): an
+// orthographic view from azimuth -60°, elevation 30°; agents far from the viewer are
+// drawn first and paler, in DEPTHS bands of depth.
+const CAMERA = (() => {
+  const th = 30 * Math.PI / 180, ph = -60 * Math.PI / 180;
+  return { right: [-Math.sin(ph), Math.cos(ph), 0],
+           up: [-Math.sin(th) * Math.cos(ph), -Math.sin(th) * Math.sin(ph), Math.cos(th)],
+           eye: [Math.cos(th) * Math.cos(ph), Math.cos(th) * Math.sin(ph), Math.sin(th)] };
+})();
+const DEPTHS = 4;
+const dot3 = (a, x, y, z) => a[0] * x + a[1] * y + a[2] * z;
+
 async function loadTrajectory(job, frames) {
+  // one agent of one frame first: the state's dimension (2 or 3) sizes the budget
+  const probe = await api(`/v1/jobs/${job.id}/trajectory?format=json&stop=1&agents=0`
+                          + "&arrays=position");
+  const dim = probe.position[0][0].length;
   const n = job.n_agents;
-  const perAgentFrame = 4 * 8;  // position + velocity, or position + heading (less)
+  const perAgentFrame = 2 * dim * 8;  // position + velocity (or heading) as float64
   const agentStride = Math.max(1, Math.ceil(n * perAgentFrame / TRAJECTORY_BUDGET));
   const shown = Math.ceil(n / agentStride);
   const stride = Math.max(1, Math.ceil(frames * shown * perAgentFrame / TRAJECTORY_BUDGET));
@@ -490,34 +506,102 @@ async function loadTrajectory(job, frames) {
   setPlayer(arrays);
 }
 
+/** Each agent's unit heading in frame-agent i, as [x, y, z]: the recorded heading (an
+ *  angle in 2D, a unit vector in 3D), else the velocity's direction, else the x axis. */
+function headingReader(arrays, dim) {
+  const h = arrays.heading, v = arrays.velocity;
+  if (h && h.shape.length === 2) return (i) => [Math.cos(h.data[i]), Math.sin(h.data[i]), 0];
+  const vec = h || v;
+  if (!vec) return () => [1, 0, 0];
+  const d = vec.data;
+  return (i) => {
+    const x = d[dim * i], y = d[dim * i + 1], z = dim === 3 ? d[dim * i + 2] : 0;
+    const len = Math.hypot(x, y, z);
+    return len > 0 ? [x / len, y / len, z / len] : [1, 0, 0];
+  };
+}
+
+/** The frames as what a drawing needs, computed once: each agent's picture (sx, sy), its
+ *  unit heading as seen (ux, uy) and its colour bucket (depth band x heading hue, the
+ *  hue from the heading's azimuth); in 3D the box around every frame, as a wireframe. */
 function setPlayer(arrays) {
   const pos = arrays.position;
   const [frames, n] = pos.shape;
-  let heading = arrays.heading ? arrays.heading.data : null;
-  if (!heading && arrays.velocity) {
-    const v = arrays.velocity.data;
-    heading = new Float64Array(frames * n);
-    for (let i = 0; i < frames * n; i++) heading[i] = Math.atan2(v[2 * i + 1], v[2 * i]);
-  }
-  if (!heading) heading = new Float64Array(frames * n);
-  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  const dim = pos.shape[2] || 2;
+  const count = frames * n;
   const p = pos.data;
-  for (let i = 0; i < frames * n; i++) {
-    const x = p[2 * i], y = p[2 * i + 1];
+  const heading = headingReader(arrays, dim);
+  const sx = new Float32Array(count), sy = new Float32Array(count);
+  const ux = new Float32Array(count), uy = new Float32Array(count);
+  const depth = dim === 3 ? new Float32Array(count) : null;
+  const bucket = new Uint8Array(count);
+  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+  for (let i = 0; i < count; i++) {
+    const x = p[dim * i], y = p[dim * i + 1], z = dim === 3 ? p[dim * i + 2] : 0;
+    const [hx, hy, hz] = heading(i);
+    if (depth) {
+      sx[i] = dot3(CAMERA.right, x, y, z);
+      sy[i] = dot3(CAMERA.up, x, y, z);
+      depth[i] = dot3(CAMERA.eye, x, y, z);
+      ux[i] = dot3(CAMERA.right, hx, hy, hz);
+      uy[i] = dot3(CAMERA.up, hx, hy, hz);
+    } else {
+      sx[i] = x; sy[i] = y; ux[i] = hx; uy[i] = hy;
+    }
+    if (x < lo[0]) lo[0] = x; if (x > hi[0]) hi[0] = x;
+    if (y < lo[1]) lo[1] = y; if (y > hi[1]) hi[1] = y;
+    if (z < lo[2]) lo[2] = z; if (z > hi[2]) hi[2] = z;
+    const turn = (Math.atan2(hy, hx) + Math.PI) / (2 * Math.PI);
+    let b = Math.floor((turn - Math.floor(turn)) * HUES);
+    if (!(b >= 0 && b < HUES)) b = 0;
+    bucket[i] = b;
+  }
+  const box = depth ? wireframe(lo, hi) : null;
+  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  for (const [x, y] of box ? box.corners : [[lo[0], lo[1]], [hi[0], hi[1]]]) {
     if (x < x0) x0 = x; if (x > x1) x1 = x; if (y < y0) y0 = y; if (y > y1) y1 = y;
+  }
+  if (depth) {  // the depth band: 0 the farthest .. DEPTHS - 1 the nearest (2D: nearest)
+    const span = Math.max(box.near - box.far, 1e-12);
+    for (let i = 0; i < count; i++) {
+      const band = Math.min(DEPTHS - 1, Math.floor((depth[i] - box.far) / span * DEPTHS));
+      bucket[i] += HUES * Math.max(0, band);
+    }
+  } else {
+    for (let i = 0; i < count; i++) bucket[i] += HUES * (DEPTHS - 1);
   }
   const half = Math.max(x1 - x0, y1 - y0, 1e-9) / 2 * 1.05;
   const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
-  state.player = { frames, n, pos: p, heading, time: arrays.time ? arrays.time.data : null,
+  state.player = { frames, n, dim, sx, sy, ux, uy, bucket, box,
+                   time: arrays.time ? arrays.time.data : null,
                    step: arrays.step ? arrays.step.data : null, frame: 0, playing: false,
                    view: [cx - half, cy - half, 2 * half], acc: 0, last: 0,
-                   bucket: new Uint8Array(n), order: new Int32Array(n),
-                   counts: new Int32Array(HUES + 1), draws: 0, fpsSince: performance.now() };
+                   order: new Int32Array(n), counts: new Int32Array(BUCKETS + 1), draws: 0,
+                   fpsSince: performance.now() };
   $("scrub").max = String(frames - 1);
   $("scrub").value = "0";
   $("scrub").disabled = false;
   $("play").disabled = false;
   drawFrame(0);
+}
+
+/** The box lo..hi seen through the camera: its corners' pictures, its 12 edges (those
+ *  meeting at the farthest corner hidden), and its depth range. */
+function wireframe(lo, hi) {
+  const corners = [], depths = [];
+  for (let c = 0; c < 8; c++) {
+    const x = c & 4 ? hi[0] : lo[0], y = c & 2 ? hi[1] : lo[1], z = c & 1 ? hi[2] : lo[2];
+    corners.push([dot3(CAMERA.right, x, y, z), dot3(CAMERA.up, x, y, z)]);
+    depths.push(dot3(CAMERA.eye, x, y, z));
+  }
+  const far = depths.indexOf(Math.min(...depths));
+  const edges = [];
+  for (let a = 0; a < 8; a++) {
+    for (const bit of [1, 2, 4]) {
+      if (!(a & bit)) edges.push([a, a | bit, a === far || (a | bit) === far]);
+    }
+  }
+  return { corners, edges, far: Math.min(...depths), near: Math.max(...depths) };
 }
 
 function stopPlayer() {
@@ -532,7 +616,12 @@ function stopPlayer() {
   $("fps").textContent = "";
 }
 
-const HUE_COLOURS = Array.from({ length: HUES }, (_, b) => `hsl(${(b + 0.5) * 360 / HUES}, 90%, 45%)`);
+// Colour buckets: depth band (far ones paler, mixed towards white) x heading hue.
+const BUCKETS = DEPTHS * HUES;
+const BUCKET_COLOURS = Array.from({ length: BUCKETS }, (_, k) => {
+  const band = Math.floor(k / HUES), hue = k % HUES;
+  return `hsl(${(hue + 0.5) * 360 / HUES}, 90%, ${45 + (DEPTHS - 1 - band) * 12}%)`;
+});
 
 function drawFrame(k) {
   const pl = state.player;
@@ -543,34 +632,28 @@ function drawFrame(k) {
   const [vx, vy, vw] = pl.view;
   const s = size / vw;
   const base = k * pl.n;
-  // counting sort of the agents by heading colour: one stroke per colour
+  // counting sort of the agents by bucket: one stroke per colour, far bands first
   const counts = pl.counts;
   counts.fill(0);
-  for (let i = 0; i < pl.n; i++) {
-    const h = pl.heading[base + i];
-    let b = Math.floor(((h + Math.PI) / (2 * Math.PI) - Math.floor((h + Math.PI) / (2 * Math.PI))) * HUES);
-    if (!(b >= 0 && b < HUES)) b = 0;
-    pl.bucket[i] = b;
-    counts[b + 1]++;
-  }
-  for (let b = 0; b < HUES; b++) counts[b + 1] += counts[b];
-  const fill = counts.slice(0, HUES);
-  for (let i = 0; i < pl.n; i++) pl.order[fill[pl.bucket[i]]++] = i;
+  for (let i = 0; i < pl.n; i++) counts[pl.bucket[base + i] + 1]++;
+  for (let b = 0; b < BUCKETS; b++) counts[b + 1] += counts[b];
+  const fill = counts.slice(0, BUCKETS);
+  for (let i = 0; i < pl.n; i++) pl.order[fill[pl.bucket[base + i]]++] = i;
   ctx.fillStyle = "#fff";
   ctx.fillRect(0, 0, size, size);
+  if (pl.box) drawWireframe(ctx, pl.box, (x) => (x - vx) * s, (y) => size - (y - vy) * s);
   const len = pl.n > 2000 ? 4 : pl.n > 200 ? 7 : 12;
   ctx.lineWidth = pl.n > 2000 ? 1 : 2;
-  for (let b = 0; b < HUES; b++) {
+  for (let b = 0; b < BUCKETS; b++) {
     if (counts[b] === counts[b + 1]) continue;
-    ctx.strokeStyle = HUE_COLOURS[b];
+    ctx.strokeStyle = BUCKET_COLOURS[b];
     ctx.beginPath();
     for (let j = counts[b]; j < counts[b + 1]; j++) {
-      const i = pl.order[j];
-      const x = (pl.pos[2 * (base + i)] - vx) * s;
-      const y = size - (pl.pos[2 * (base + i) + 1] - vy) * s;
-      const h = pl.heading[base + i];
-      ctx.moveTo(x - 0.3 * len * Math.cos(h), y + 0.3 * len * Math.sin(h));
-      ctx.lineTo(x + len * Math.cos(h), y - len * Math.sin(h));
+      const i = base + pl.order[j];
+      const x = (pl.sx[i] - vx) * s, y = size - (pl.sy[i] - vy) * s;
+      const u = len * pl.ux[i], v = len * pl.uy[i];
+      ctx.moveTo(x - 0.3 * u, y + 0.3 * v);
+      ctx.lineTo(x + u, y - v);
     }
     ctx.stroke();
   }
@@ -578,7 +661,24 @@ function drawFrame(k) {
   pl.draws++;
   $("scrub").value = String(k);
   const t = pl.time ? pl.time[k] : k;
-  $("frame-info").textContent = `frame ${k + 1}/${pl.frames}  t = ${Number(t).toPrecision(4)}`;
+  $("frame-info").textContent = `frame ${k + 1}/${pl.frames}  t = ${Number(t).toPrecision(4)}`
+    + (pl.dim === 3 ? "  (3D: paler = farther)" : "");
+}
+
+function drawWireframe(ctx, box, X, Y) {
+  ctx.lineWidth = 1;
+  ctx.strokeStyle = "#999";
+  for (const hidden of [true, false]) {
+    ctx.setLineDash(hidden ? [3, 3] : []);
+    ctx.beginPath();
+    for (const [a, b, back] of box.edges) {
+      if (back !== hidden) continue;
+      ctx.moveTo(X(box.corners[a][0]), Y(box.corners[a][1]));
+      ctx.lineTo(X(box.corners[b][0]), Y(box.corners[b][1]));
+    }
+    ctx.stroke();
+  }
+  ctx.setLineDash([]);
 }
 
 function tick(now) {
