@@ -118,7 +118,8 @@ def render(args: argparse.Namespace) -> dict[str, object]:
         opts = SnapshotOptions(w, h, args.field, args.edges, args.trails,
                                not args.no_overlays)
         n = write_movie(run, out, opts, fps=args.fps, stride=args.stride,
-                        on_progress=ProgressBar(sys.stderr.isatty() and not args.quiet))
+                        on_progress=ProgressBar(sys.stderr.isatty() and not args.quiet,
+                                                unit="frame"))
         return {"kind": "movie", "frames": n}
     if args.plot is not None:
         from .plots import draw_observables

@@ -106,6 +106,9 @@ class Scene:
                                    "or field=arrows)", loc="trails")
         self.want_edges = self.mode == "arrows" and (opts.edges if opts.edges is not None else (
             run.n_agents <= EDGES_MAX_AGENTS and run.kind != "formation"))
+        # JLM's leader rule (eq. 22): agent 0 is the leader, ringed
+        self.ring_leader = (self.mode == "arrows" and opts.overlays and run.kind == "vicsek"
+                            and run.doc["model"].get("rule") == "leader")
         n = run.n_agents
         self.dot = 18 if n <= 50 else 6 if n <= 1000 else 2  # marker area, points^2
         self.artists: dict[str, Any] = {}  # everything that changes from frame to frame
@@ -152,6 +155,8 @@ class Scene:
             a["arrows"].set_UVC(uv[:, 0], uv[:, 1])
             a["arrows"].set_color(colours)
             agents = len(a["arrows"].U)
+            if self.ring_leader:
+                a["agent0"].set_offsets(cam.screen(fr.position[:1]))
         else:
             image, coarse = field_data(cam.screen(fr.position), fr.directions, self.mode,
                                        self.view.limits, cam)
@@ -217,6 +222,10 @@ class Scene:
         else:
             a["image"], a["coarse"] = field_artists(ax, cax, self.mode, self.view.limits,
                                                     cam)
+        if self.ring_leader:
+            a["agent0"] = ax.scatter([], [], s=150, marker="o", fc="none", ec="k", lw=1.2,
+                                     zorder=5, label="leader (agent 0, eq. 22)")
+            ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
         if obst is not None:
             _draw_obstacles(ax, obst, cam)
         if self.opts.overlays and run.kind == "formation":

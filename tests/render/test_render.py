@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -72,6 +73,37 @@ def test_overlays_are_drawn(runs):
     star = next(c for c in fig.axes[0].collections if c.get_label() == "p(t)")
     i = int(np.argmin(np.abs(t_obs - run.frame(k).time)))
     np.testing.assert_allclose(star.get_offsets()[0], leader[i], atol=1e-9)
+
+
+def test_jlm_leader_is_ringed(tmp_path, taichi_cpu):
+    """The leader rule's agent 0 (JLM eq. 22) is marked where it is."""
+    from .conftest import preset_scenario, run_to
+
+    run = RunData(run_to(tmp_path / "jlm", preset_scenario("jlm-leader",
+                                                          {"time": {"steps": 20}})))
+    fig = new_figure(300, 300)
+    draw_snapshot(fig, run, run.n_frames - 1, SnapshotOptions(300, 300))
+    ring = next(c for c in fig.axes[0].collections if c.get_label().startswith("leader"))
+    np.testing.assert_array_equal(ring.get_offsets(), run.frame(run.n_frames - 1).position[:1])
+    fig = new_figure(300, 300)
+    draw_snapshot(fig, run, 0, SnapshotOptions(300, 300, overlays=False))
+    assert fig.axes[0].get_legend() is None
+
+
+def test_explicit_initial_state_is_drawn(tmp_path, taichi_cpu):
+    """A run of examples/obstacles.json (positions given, so no initial.N in its
+    scenario.json) is drawn with its 12 agents."""
+    from flocklab.schemas import Scenario
+
+    from .conftest import merge, run_to
+
+    doc = json.loads((Path(__file__).parents[2] / "examples" / "obstacles.json").read_text())
+    sc = Scenario.model_validate(merge(doc, {"time": {"steps": 500}}))
+    run = RunData(run_to(tmp_path / "m3", sc))
+    assert "N" not in run.doc["initial"] and run.n_agents == 12
+    fig = new_figure(300, 300)
+    info = draw_snapshot(fig, run, run.n_frames - 1, SnapshotOptions(300, 300))
+    assert info.agents_drawn == 12
 
 
 def test_frame_time_and_trails(runs, tmp_path):
