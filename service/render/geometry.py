@@ -13,6 +13,8 @@ Vicsek or switching-graph snapshot starts in a fraction of a second.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
@@ -143,6 +145,17 @@ class Leaders:
 def leaders(run: RunData, t: float) -> Leaders | None:
     if run.kind != "formation":
         return None
+    path, samples, schedule = _leader_motion(run)
+    p = path.position(t)
+    targets = p[None, :] + schedule.at(t) if schedule is not None else None
+    return Leaders(p, samples, targets)
+
+
+@lru_cache(maxsize=4)
+def _leader_motion(run: RunData) -> tuple[Any, np.ndarray, Any]:
+    """The run's leader path p(t), 400 samples of it over the run, and (F1) its offset
+    schedule b_i(t): built once per run, not per movie frame (sampling an arc-length
+    spline is about half a second)."""
     model = run.scenario.model
     from flocklab.kernels.models.formation.path import make_path
 
@@ -155,11 +168,10 @@ def leaders(run: RunData, t: float) -> Leaders | None:
     path = make_path(model.path, start)
     t_end = float(run.scenario.time.steps * run.scenario.time.dt)
     samples = np.array([path.position(s) for s in np.linspace(0.0, t_end, 400)])
-    targets = None
+    schedule = None
     if model.design == "F1":
         from flocklab.kernels.models.formation.schedule import OffsetSchedule
 
         d = float(run.scenario.neighbours.radius)
-        b = OffsetSchedule(model.formation, model.schedule, run.n_agents, d, dim).at(t)
-        targets = path.position(t)[None, :] + b
-    return Leaders(path.position(t), samples, targets)
+        schedule = OffsetSchedule(model.formation, model.schedule, run.n_agents, d, dim)
+    return path, samples, schedule
