@@ -114,6 +114,30 @@ def test_render_errors_are_problems(http, done_job, server):
                    404)
 
 
+def test_results_deleted_while_drawing_answer_410(server, http):
+    """The results folder removed while a movie is being drawn (expiry, or by hand): the
+    route answers the result routes' 410, not a server error."""
+    import shutil
+    import threading
+
+    job = submit(http, scenario(n=200, steps=100, every=1))
+    assert wait_for(http, job["id"])["status"] == "succeeded"
+    folder = server.data_dir / "results" / job["id"]
+    answer: list[httpx.Response] = []
+    ask = threading.Thread(target=lambda: answer.append(http.get(
+        f"/v1/jobs/{job['id']}/render/movie.mp4", params={"width": 480, "height": 480},
+        timeout=300)))
+    ask.start()
+    deadline = time.monotonic() + 60
+    while not (folder / "render").is_dir():  # the draw has begun
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    while folder.exists():  # the worker may add its file while the tree is removed
+        shutil.rmtree(folder, ignore_errors=True)
+    ask.join(300)
+    assert_problem(answer[0], 410)
+
+
 def test_client_snapshot(server, done_job, tmp_path):
     with clients.Client(server.url) as c:
         job = c.job(done_job)

@@ -152,7 +152,14 @@ async def _render(app: FastAPI, locate: Callable[[], tuple[Job, Path]], what: st
         lock = _locks.setdefault(str(target), asyncio.Lock())
         async with lock:
             if not target.is_file():  # another request may have drawn it meanwhile
-                await _draw(_slots(app), what, folder, target, options)
+                try:
+                    await _draw(_slots(app), what, folder, target, options)
+                except Exception:
+                    # the results may have expired (their folder deleted) while drawing:
+                    # then that is the answer (410), not the worker's failure to read or
+                    # write them (a 422 "not a run folder", or a server error)
+                    await run_in_threadpool(locate)
+                    raise
         _locks.pop(str(target), None)
     return FileResponse(target, media_type=media, filename=filename,
                         content_disposition_type="inline")
