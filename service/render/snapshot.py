@@ -32,6 +32,7 @@ from .run_data import Frame, RunData
 
 FIELD_ABOVE = 5000  # agents: arrows beyond this are unreadable at any picture size
 EDGES_MAX_AGENTS = 200  # edges drawn by default up to here (the papers' N; denser is a blur)
+TARGETS_MAX_AGENTS = 200  # M4 F1: each virtual leader and offset up to here, else their outline
 Field = Literal["auto", "arrows", "density", "polarization"]
 FIELDS: tuple[str, ...] = ("auto", "arrows", "density", "polarization")
 
@@ -110,6 +111,7 @@ class Scene:
         self.ring_leader = (self.mode == "arrows" and opts.overlays and run.kind == "vicsek"
                             and run.doc["model"].get("rule") == "leader")
         n = run.n_agents
+        self.each_target = n <= TARGETS_MAX_AGENTS
         self.dot = 18 if n <= 50 else 6 if n <= 1000 else 2  # marker area, points^2
         self.artists: dict[str, Any] = {}  # everything that changes from frame to frame
         self._background: Any = None
@@ -171,9 +173,12 @@ class Scene:
             a["leader"].set_offsets(leader[None, :])
             if lead.targets is not None:
                 targets = cam.screen(lead.targets)
-                a["targets"].set_offsets(targets)
-                a["offsets"].set_segments(np.stack(
-                    [np.repeat(leader[None, :], len(targets), 0), targets], axis=1))
+                if self.each_target:
+                    a["targets"].set_offsets(targets)
+                    a["offsets"].set_segments(np.stack(
+                        [np.repeat(leader[None, :], len(targets), 0), targets], axis=1))
+                else:
+                    a["outline"].set_data(*_outline(targets).T)
         a["title"].set_text(f"{run.name}: N = {run.n_agents}, t = {fr.time:.4g} "
                             f"(step {fr.step})")
         return SnapshotInfo(k, fr.step, fr.time, self.mode, agents, edges_drawn, trails_drawn)
@@ -253,13 +258,16 @@ class Scene:
         path = cam.screen(lead.path)
         ax.plot(path[:, 0], path[:, 1], ls="--", lw=1.0, c="0.35", zorder=1,
                 label="leader path p(t)")
-        if lead.targets is not None:
+        if lead.targets is not None and self.each_target:
             a["offsets"] = ax.add_collection(LineCollection(
                 [], colors="tab:blue", linewidths=0.6, linestyles=":", zorder=2))
             targets = cam.screen(lead.targets)
             a["targets"] = ax.scatter(targets[:, 0], targets[:, 1], s=40, marker="s",
                                       fc="none", ec="tab:blue", zorder=3,
                                       label="virtual leaders r_id = p + b_i")
+        elif lead.targets is not None:  # thousands of squares would hide the agents
+            (a["outline"],) = ax.plot([], [], c="tab:blue", lw=1.2, zorder=4,
+                                      label="outline of the virtual leaders r_id")
         leader = cam.screen(lead.leader)
         a["leader"] = ax.scatter([leader[0]], [leader[1]], s=160, marker="*", c="gold",
                                  ec="k", zorder=6, label="p(t)")
@@ -436,6 +444,19 @@ def _trail_paths(trails: np.ndarray, box: float | None) -> np.ndarray:
     return paths
 
 
+def _outline(points: np.ndarray) -> np.ndarray:
+    """The convex hull of (K, 2) points as a closed polyline (K' + 1, 2); points on a line
+    give the segment between the two ends."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        ring = points[ConvexHull(points).vertices]
+    except QhullError:  # fewer than three points, or all on one line
+        order = np.lexsort((points[:, 1], points[:, 0]))
+        ring = points[[order[0], order[-1]]]
+    return np.vstack([ring, ring[:1]])
+
+
 def _draw_obstacles(ax: Any, obst: geometry.Obstacles, cam: Camera) -> None:
     """M3's point obstacles, its discs (spheres in 3D: their projected discs, seen
     through) and the destination."""
@@ -443,8 +464,8 @@ def _draw_obstacles(ax: Any, obst: geometry.Obstacles, cam: Camera) -> None:
 
     if len(obst.points):
         pts = cam.screen(obst.points)
-        ax.scatter(pts[:, 0], pts[:, 1], s=14, marker="o", c="0.15", zorder=3,
-                   label="obstacles")
+        ax.scatter(pts[:, 0], pts[:, 1], s=14 if len(pts) <= 100 else 5, marker="o",
+                   c="0.15", zorder=3, label="obstacles")
     for centre, r in obst.discs:
         ax.add_patch(Circle(tuple(cam.screen(np.asarray(centre))), r, fc="0.6", ec="0.15",
                             alpha=0.45 if cam.is_3d else 1.0, zorder=2))

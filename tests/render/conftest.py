@@ -96,6 +96,22 @@ def large_run(tmp_path_factory: pytest.TempPathFactory, taichi_cpu) -> Path:
     return run_to(tmp_path_factory.mktemp("render-large") / "vicsek-1e5", sc)
 
 
+@pytest.fixture(scope="session")
+def large_runs(tmp_path_factory: pytest.TempPathFactory, taichi_cpu) -> dict[str, Path]:
+    """10^5 agents of the other families: the benchmark's own large-N scenarios
+    (bench/workload_*.py), ten steps, three frames."""
+    from bench.workload_flocking import flocking_obstacles, flocking_switching
+    from bench.workload_formation import f1, f2
+
+    root = tmp_path_factory.mktemp("render-large-families")
+    short = {"time": {"steps": 10}, "recording": {
+        "every": 5, "arrays": ["position", "velocity"], "observables_every": 5}}
+    return {name: run_to(root / name, Scenario.model_validate(merge(make(100_000), short)))
+            for name, make in [("flocking_switching", flocking_switching),
+                               ("flocking_obstacles", flocking_obstacles),
+                               ("formation_F1", f1), ("formation_F2", f2)]}
+
+
 def read_image(path_or_bytes: Path | bytes) -> np.ndarray:
     """An image file as an (H, W, C) uint8 array (imageio decodes PNG)."""
     import imageio.v3 as iio

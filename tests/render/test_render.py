@@ -149,6 +149,28 @@ def test_large_n_draws_a_field_quickly(large_run, tmp_path):
         assert elapsed < 30, elapsed  # the bar is 5 s at 10^6 (bench/render_bench.py)
 
 
+@pytest.mark.parametrize("family", ["flocking_switching", "flocking_obstacles",
+                                    "formation_F1", "formation_F2"])
+def test_large_n_of_every_family(large_runs, tmp_path, family):
+    """10^5 agents: a density field with the family's overlays; F1's 10^5 virtual leaders
+    as their outline, not 10^5 squares over the field."""
+    run = RunData(large_runs[family])
+    fig = new_figure(800, 800)
+    info = draw_snapshot(fig, run, run.pick_frame(), SnapshotOptions(800, 800))
+    save(fig, tmp_path / "large.png")
+    assert info.mode == "density" and info.agents_drawn == run.n_agents == 100_000
+    assert_picture(read_image(tmp_path / "large.png"), 800, 800)
+    labels = {t.get_text() for t in fig.axes[0].get_legend().get_texts()} if (
+        run.kind != "flocking") else set()
+    if family == "formation_F1":
+        assert labels == {"leader path p(t)", "outline of the virtual leaders r_id", "p(t)"}
+        outline = next(ln for ln in fig.axes[0].get_lines()
+                       if ln.get_label().startswith("outline"))
+        assert 3 <= len(outline.get_xdata()) < 1000
+    elif family == "flocking_obstacles":
+        assert labels == {"obstacles", "destination"}
+
+
 def test_observables_plot_marks_convergence(runs, tmp_path):
     run = RunData(runs["flocking_fixed"])
     conv = run.convergence
