@@ -4,6 +4,8 @@
   a 10^3-agent frame with its interaction edges bar: < 1 s
   a 200-frame MP4 of 10^4 agents                bar: < 60 s
 
+and the same two frames of 3D runs (the cube at the same density; no bar of their own).
+
 Each case first runs a small Vicsek scenario into a temporary folder (not timed), then
 times `flocklab render` REPEAT times each way: the whole command in a fresh process, as
 the `flocklab` console script runs it (`service.entry`; `cli_seconds` wall and
@@ -21,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import resource
 import statistics
@@ -34,11 +35,13 @@ from pathlib import Path
 from flocklab.schemas import Scenario
 
 
-def vicsek(n: int, steps: int, every: int) -> Scenario:
+def vicsek(n: int, steps: int, every: int, dim: int = 2) -> Scenario:
+    """Vicsek at density 4 in the periodic square (cube in 3D)."""
     return Scenario.model_validate({
         "name": f"bench-{n}", "model": {"kind": "vicsek", "rule": "vicsek", "v0": 0.03,
                                         "eta": 0.5},
-        "space": {"kind": "periodic", "L": math.sqrt(n / 4)}, "neighbours": {"radius": 1.0},
+        "space": {"kind": "periodic", "L": (n / 4) ** (1 / dim), "dimension": dim},
+        "neighbours": {"radius": 1.0},
         "initial": {"kind": "random", "N": n}, "time": {"steps": steps, "dt": 1.0},
         "recording": {"every": every, "arrays": ["position", "heading"],
                       "observables_every": max(1, every)}, "seed": 1})
@@ -50,6 +53,9 @@ CASES = [
     ("frame_1e3_edges", vicsek(1000, 10, 10), ["--edges", "--size", "800x800"], 1.0),
     ("movie_200_frames_1e4", vicsek(10_000, 199, 1),
      ["--movie", "--size", "640x640", "--quiet"], 60.0),
+    ("frame_1e6_field_3d", vicsek(1_000_000, 1, 1, dim=3), ["--size", "800x800"], 5.0),
+    ("frame_1e3_edges_3d", vicsek(1000, 10, 10, dim=3), ["--edges", "--size", "800x800"],
+     1.0),
 ]
 
 

@@ -261,7 +261,7 @@ def test_movie_frames_match_full_drawings(request, runs_fixture, family, frames)
     for k in frames:
         k %= run.n_frames
         scene.draw(k)
-        blitted = scene.rgb()
+        blitted = scene.rgba()[:, :, :3].copy()
         fig = new_figure(320, 320)
         Scene(fig, run, opts, view).draw(k)
         fig.canvas.draw()
