@@ -72,6 +72,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     except (RenderInputError, PlottingUnavailable) as exc:
         print(f"flocklab render: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except ModuleNotFoundError as exc:  # h5py, scipy, or one of matplotlib's own
+        print(f"flocklab render: {exc.name} is not installed: pip install 'flocklab[plot]'",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
     print(json.dumps({"out": str(args.out), **summary}))
     return EXIT_OK
 

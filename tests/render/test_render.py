@@ -235,6 +235,13 @@ def test_cli_render_and_its_errors(runs, tmp_path):
     r = subprocess.run([*cmd[:5], "--out", str(tmp_path / "x.bmp")], capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 2 and "unknown picture type" in r.stderr
+    # an install without h5py (the plot extra): one line naming the extra
+    blocked = ("import sys; sys.modules['h5py'] = None; from flocklab.service.entry import "
+               "main; sys.exit(main(sys.argv[1:]))")
+    r = subprocess.run([sys.executable, "-c", blocked, *cmd[3:]], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "h5py is not installed: pip install 'flocklab[plot]'" in r.stderr
 
 
 def test_trajectory_frames_are_in_agent_order(runs):
