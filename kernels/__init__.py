@@ -1,7 +1,8 @@
 """flocklab's engine: Taichi kernels behind one numpy-facing entry, `run`.
 
-Importing this package never calls `ti.init`; `run` initialises the requested backend in
-the calling process (on the calling thread) the first time it is needed.
+Importing this package never calls `ti.init` (nor imports Taichi: the names below load
+on first use); `run` initialises the requested backend in the calling process (on the
+calling thread) the first time it is needed.
 """
 
 import os
@@ -13,7 +14,20 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
 # day: traffic off this machine that neither a user nor an offline container asked for.
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
-from .engine import run, run_batch
-from .result import BackendUnavailable, FrameSink, RunResult, SimulationDiverged
+# The public names load on first use (PEP 562): the engine imports Taichi (~0.8 s), and
+# the numpy-only parts of the model packages (leader paths, fixed graphs, offset
+# schedules, which `flocklab render` draws from) must not pay for it.
+_PUBLIC = {"run": "engine", "run_batch": "engine", "BackendUnavailable": "result",
+           "FrameSink": "result", "RunResult": "result", "SimulationDiverged": "result"}
 
-__all__ = ["BackendUnavailable", "FrameSink", "RunResult", "SimulationDiverged", "run", "run_batch"]
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name: str):
+    if name not in _PUBLIC:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from importlib import import_module
+
+    value = getattr(import_module(f".{_PUBLIC[name]}", __name__), name)
+    globals()[name] = value
+    return value
