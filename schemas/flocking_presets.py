@@ -112,7 +112,7 @@ def tanner_obstacles() -> dict:
 @register_preset(
     "tjp-switching-3d",
     "examples/flocking_3d.json: paper 000's switching law in 3D, 1000 agents from a "
-    "jittered cubic lattice, R = 2, d = 1, 20 s.",
+    "jittered cubic lattice, R = 1.5, d = 1, 30 s.",
 )
 def tjp_switching_3d() -> dict:
     return {
@@ -120,11 +120,15 @@ def tjp_switching_3d() -> dict:
         "model": {"kind": "flocking", "topology": "switching",
                   "potential": {"kind": "log_barrier", "d": 1.0}},
         "space": {"kind": "plane", "dimension": 3},
-        "neighbours": {"radius": 2.0},
+        # R = 1.5: the first shell of the lattice and part of the second. With R = 2 (the
+        # 2D presets' radius) the interior agents' 30-odd neighbours press pairs to 0.1 d,
+        # where the barrier's stiffness outruns any practical Euler step (dt = 0.002
+        # still let Q rise and speeds reach 10^2): tests/test_presets_3d.py.
+        "neighbours": {"radius": 1.5},
         "initial": {"kind": "random", "N": 1000, "speed_range": [0.0, 1.0],
                     "region": {"kind": "lattice", "low": [0.0, 0.0, 0.0], "spacing": 1.1,
                                "jitter": 0.2}},
-        "time": {"steps": 2000, "dt": 0.01},
+        "time": {"steps": 3000, "dt": 0.01},
         "recording": {"every": 100, "arrays": ["position", "velocity"], "observables_every": 10},
         "seed": 1,
         "backend": "cpu",
