@@ -14,9 +14,9 @@ from .common import (
     Recording,
     TimeSpec,
 )
-from .presets import PRESETS, get_preset
+from .presets import PRESETS
 from .problems import FieldError, Problem, field_errors, parse_json_strict
-from .scenario import Scenario
+from .scenario import Scenario, get_preset
 from .vicsek import VicsekParams
 
 __all__ = [

@@ -7,12 +7,22 @@ registry must hold exactly the same kinds (a test checks it).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, ClassVar
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal
 
 from .base import Strict
 
-if TYPE_CHECKING:
-    from .scenario import Scenario
+
+@dataclass(frozen=True)
+class ModelContext:
+    """What a model's cross-block checks may read of the scenario around it. The scenario
+    builds it, so a model module never imports the scenario (no import cycle)."""
+
+    n_agents: int
+    dimension: int
+    space: Literal["periodic", "plane"]
+    radius: float | None  # neighbours.radius; None without a neighbours block
+    dt: float
 
 
 class ModelParams(Strict):
@@ -32,11 +42,11 @@ class ModelParams(Strict):
     # choose among them with recording.observables); None: not declared.
     observables: ClassVar[tuple[str, ...] | None] = None
     # The values of space.dimension the model runs in; `dimensions_note` says which
-    # variants are narrower (checked by `check_scenario`).
+    # variants are narrower (checked by `check_context`).
     dimensions: ClassVar[tuple[int, ...]] = (2,)
     dimensions_note: ClassVar[str] = ""
 
-    def check_scenario(self, scenario: Scenario) -> None:
+    def check_context(self, ctx: ModelContext) -> None:
         """Cross-block checks (raise ValueError with a user-facing message)."""
 
 

@@ -14,17 +14,13 @@ paper 002's 1/s^2 + log s^2 (a = 1, c = 0, minimum at s = 1).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Annotated, ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
 import pydantic
 from pydantic import Field, model_validator
 
 from .base import NonNegativeInt, PositiveInt, PositiveReal, Strict
-from .catalog import ModelParams, register_model
-from .common import Plane
-
-if TYPE_CHECKING:
-    from .scenario import Scenario
+from .catalog import ModelContext, ModelParams, register_model
 
 # Undirected edges a fixed graph may hold (CSR: 2 x 4 bytes per edge, 400 MB at the limit).
 MAX_GRAPH_EDGES = 50_000_000
@@ -215,8 +211,8 @@ class DoubleIntegratorParams(ModelParams):
         "N <= this; above it the observable lambda2 reports -1 (not computed).",
     )
 
-    def _check_plane(self, scenario: Scenario, paper: str) -> None:
-        if not isinstance(scenario.space, Plane):
+    def _check_plane(self, ctx: ModelContext, paper: str) -> None:
+        if ctx.space != "plane":
             raise ValueError(
                 f"model {self.kind!r} runs on the unbounded plane (space.kind 'plane'), as in "
                 f"paper {paper}"
@@ -227,19 +223,19 @@ class DoubleIntegratorParams(ModelParams):
             self.neighbour_search == "auto" and n <= ALL_PAIRS_AUTO
         )
 
-    def _check_search(self, scenario: Scenario) -> None:
-        n = scenario.n_agents
+    def _check_search(self, ctx: ModelContext) -> None:
+        n = ctx.n_agents
         if self.neighbour_search == "all_pairs" and n > ALL_PAIRS_MAX:
             raise ValueError(
                 f"neighbour_search 'all_pairs' costs N^2 per step: allowed up to N = "
                 f"{ALL_PAIRS_MAX}, here N = {n}; use 'grid' or 'auto'"
             )
 
-    def _check_dt(self, scenario: Scenario, max_valency: int | None) -> None:
+    def _check_dt(self, ctx: ModelContext, max_valency: int | None) -> None:
         """Reject a dt beyond the integrator's explicit stability limit for (a) a pair
         oscillating at the potential's minimum, omega^2 = 2 V''(d), and (b) the alignment
         term, whose Laplacian eigenvalues are at most 2 * (largest valency) when known."""
-        dt = scenario.time.dt
+        dt = ctx.dt
         limit = STABILITY[self.integrator]
         omega = math.sqrt(2.0 * self.potential.curvature())
         if dt * omega >= limit:
@@ -288,13 +284,13 @@ class FlockingParams(DoubleIntegratorParams):
         default=None, description="The fixed graph (topology 'fixed' only)."
     )
 
-    def check_scenario(self, scenario: Scenario) -> None:
-        self._check_plane(scenario, "000")
-        n = scenario.n_agents
+    def check_context(self, ctx: ModelContext) -> None:
+        self._check_plane(ctx, "000")
+        n = ctx.n_agents
         if self.topology == "fixed":
             if self.graph is None:
                 raise ValueError("topology 'fixed' needs model.graph (e.g. {'kind': 'ring'})")
-            if scenario.neighbours is not None:
+            if ctx.radius is not None:
                 raise ValueError(
                     "topology 'fixed' takes its neighbours from model.graph; remove the "
                     "neighbours block (it would be ignored)"
@@ -302,18 +298,18 @@ class FlockingParams(DoubleIntegratorParams):
             if self.neighbour_search != "auto":
                 raise ValueError("neighbour_search applies to topology 'switching' only")
             self.graph.check(n)
-            self._check_dt(scenario, self.graph.max_valency(n))
+            self._check_dt(ctx, self.graph.max_valency(n))
             return
         if self.graph is not None:
             raise ValueError("model.graph applies only to topology 'fixed'")
-        if scenario.neighbours is None:
+        if ctx.radius is None:
             raise ValueError(
                 "topology 'switching' needs a neighbours block with the radius R "
                 "(section 5: i ~ j iff |r_ij| < R)"
             )
-        check_radius_exceeds_d(scenario.neighbours.radius, self.potential)
-        self._check_search(scenario)
-        self._check_dt(scenario, None)
+        check_radius_exceeds_d(ctx.radius, self.potential)
+        self._check_search(ctx)
+        self._check_dt(ctx, None)
 
 
 def check_radius_exceeds_d(radius: float, potential: PotentialSpec) -> None:

@@ -18,16 +18,12 @@ unchanged: the path's points, the offsets and the rotation axes are 3-vectors
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Annotated, ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
 from pydantic import Field, model_validator
 
 from .base import Point, PositiveInt, PositiveReal, Real, Strict, Vec3
-from .catalog import ModelParams, register_model
-from .common import Plane
-
-if TYPE_CHECKING:
-    from .scenario import Scenario
+from .catalog import ModelContext, ModelParams, register_model
 
 MAX_WAYPOINTS = 1000
 
@@ -281,12 +277,12 @@ class FormationParams(ModelParams):
         description="D2-D3: an agent within this distance of r_0 is 'at r_0' (default d/100).",
     )
 
-    def check_scenario(self, scenario: Scenario) -> None:
-        if not isinstance(scenario.space, Plane):
+    def check_context(self, ctx: ModelContext) -> None:
+        if ctx.space != "plane":
             raise ValueError("model formation runs on the unbounded plane: space.kind = 'plane'")
-        if scenario.neighbours is None:
+        if ctx.radius is None:
             raise ValueError("model formation needs a neighbours block: its radius is d")
-        n = scenario.n_agents
+        n = ctx.n_agents
         if self.design == "F2":
             if self.formation is not None or self.schedule:
                 raise ValueError("design F2 has no formation or schedule (one virtual leader)")
@@ -304,7 +300,7 @@ class FormationParams(ModelParams):
                         f"schedule[{j}] starts at {self.schedule[j].start:g}, before "
                         f"schedule[{j - 1}] ends at {self.schedule[j - 1].end:g}"
                     )
-        self._check_dimension(scenario.dimension)
+        self._check_dimension(ctx.dimension)
         f = self.attraction
         speed = self.path.speed
         if isinstance(f, SaturatingF) and speed is not None and speed >= f.v_max:

@@ -15,17 +15,14 @@ delta the distance from r_i to the obstacle's boundary (a point: |r_i - r_o|; a 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Annotated, ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
 import pydantic
 from pydantic import Field, StrictBool
 
 from .base import NonNegativeReal, Point, PositiveInt, PositiveReal, Strict
-from .catalog import register_model
+from .catalog import ModelContext, register_model
 from .flocking import DoubleIntegratorParams, PotentialSpec, check_radius_exceeds_d
-
-if TYPE_CHECKING:
-    from .scenario import Scenario
 
 MAX_OBSTACLES = 1_000_000
 Kappa = Annotated[float, Field(ge=1.0, le=100.0, allow_inf_nan=False), pydantic.Strict(True)]
@@ -112,21 +109,21 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
         "(neighbourhoods may be asymmetric). min: R_i replaced by min(R_i, R_j) (symmetric).",
     )
 
-    def check_scenario(self, scenario: Scenario) -> None:
-        self._check_plane(scenario, "002")
-        if scenario.neighbours is None:
+    def check_context(self, ctx: ModelContext) -> None:
+        self._check_plane(ctx, "002")
+        if ctx.radius is None:
             raise ValueError(
                 "model 'flocking_obstacles' needs a neighbours block: its radius is the "
                 "initial R_i of every agent"
             )
-        radius = scenario.neighbours.radius
+        radius = ctx.radius
         check_radius_exceeds_d(radius, self.potential)
         if self.radius_floor > radius:
             raise ValueError(
                 f"model.radius_floor = {self.radius_floor:g} exceeds the initial radius "
                 f"neighbours.radius = {radius:g}"
             )
-        dim = scenario.dimension
+        dim = ctx.dimension
         points = [("destination", self.destination)]
         points += [(f"obstacles[{k}]", o) for k, o in enumerate(self.obstacles)]
         points += [(f"discs[{k}].center", d.center) for k, d in enumerate(self.discs)]
@@ -142,5 +139,5 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
         for k, disc in enumerate(self.discs):
             if math.dist(self.destination, disc.center) <= disc.radius:
                 raise ValueError(f"model.discs[{k}] covers the destination {self.destination}")
-        self._check_search(scenario)
-        self._check_dt(scenario, None)
+        self._check_search(ctx)
+        self._check_dt(ctx, None)

@@ -12,7 +12,7 @@ class Preset:
     name: str
     description: str
     build: Callable[[], dict[str, Any]]
-    """Returns the scenario as a JSON-ready dict (validated by `get_preset`)."""
+    """Returns the scenario as a JSON-ready dict (validated by `scenario.get_preset`)."""
 
 
 PRESETS: dict[str, Preset] = {}
@@ -27,10 +27,3 @@ def register_preset(name: str, description: str) -> Callable[[Callable], Callabl
 
     return deco
 
-
-def get_preset(name: str):  # -> Scenario (import kept local: presets load before scenario)
-    from .scenario import Scenario
-
-    if name not in PRESETS:
-        raise KeyError(f"unknown preset {name!r}; known: {', '.join(sorted(PRESETS))}")
-    return Scenario.model_validate(PRESETS[name].build())

@@ -8,6 +8,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from .catalog import MODELS
+
 
 class FieldError(BaseModel):
     """One invalid field: where it is (a JSON path) and why it is wrong."""
@@ -56,8 +58,6 @@ def _without_union_tags(loc: tuple[str | int, ...]) -> list[str | int]:
     so a segment just after a dropped tag is a field, even one named like a tag: the
     field 'formation' of model 'formation' ('model.formation.formation.offsets' reads
     'model.formation.offsets')."""
-    from .catalog import MODELS
-
     out: list[str | int] = []
     after_tag = False
     for part in loc:

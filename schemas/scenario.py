@@ -7,6 +7,7 @@ import math
 from pydantic import Field, StrictInt, model_validator
 
 from .base import Strict
+from .catalog import ModelContext
 from .common import (
     Backend,
     Convergence,
@@ -20,6 +21,7 @@ from .common import (
     TimeSpec,
 )
 from .models import ModelSpec
+from .presets import PRESETS
 
 # Taichi indexes with 32-bit integers: N times the components per agent must stay below it.
 MAX_INDEX = 2**31 - 1
@@ -162,8 +164,19 @@ class Scenario(Strict):
             raise ValueError(
                 f"space.dimension: model {self.model.kind} runs in dimension "
                 f"{' or '.join(map(str, dims))}, not {self.dimension}")
+        ctx = ModelContext(
+            n_agents=self.n_agents, dimension=self.dimension, space=self.space.kind,
+            radius=None if self.neighbours is None else self.neighbours.radius,
+            dt=self.time.dt)
         try:
-            self.model.check_scenario(self)
+            self.model.check_context(ctx)
         except ValueError as exc:
             raise ValueError(f"model: {exc}") from exc
         return self
+
+
+def get_preset(name: str) -> Scenario:
+    """The named scenario, validated (the families register theirs in schemas/*_presets.py)."""
+    if name not in PRESETS:
+        raise KeyError(f"unknown preset {name!r}; known: {', '.join(sorted(PRESETS))}")
+    return Scenario.model_validate(PRESETS[name].build())

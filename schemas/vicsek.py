@@ -13,15 +13,12 @@ spherical cap of half-angle eta/2 around it (docs/MODELS_3D.md).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
 from pydantic import Field, StrictBool, StrictFloat
 
 from .base import NonNegativeReal, PositiveReal, Real
-from .catalog import ModelParams, register_model
-
-if TYPE_CHECKING:
-    from .scenario import Scenario
+from .catalog import ModelContext, ModelParams, register_model
 
 Rule = Literal["vicsek", "average", "laplacian", "leader"]
 
@@ -75,14 +72,14 @@ class VicsekParams(ModelParams):
         "step). null: on when N <= 100000.",
     )
 
-    def check_scenario(self, scenario: Scenario) -> None:
-        if scenario.neighbours is None:
+    def check_context(self, ctx: ModelContext) -> None:
+        if ctx.radius is None:
             raise ValueError("model vicsek needs a neighbours block with the radius r")
-        n = scenario.n_agents
-        if scenario.dimension != 2 and self.rule != "vicsek":
+        n = ctx.n_agents
+        if ctx.dimension != 2 and self.rule != "vicsek":
             raise ValueError(
                 f"rule {self.rule!r} averages headings as angles and runs in 2D only; "
-                f"space.dimension = {scenario.dimension} needs rule 'vicsek'")
+                f"space.dimension = {ctx.dimension} needs rule 'vicsek'")
         if self.rule == "laplacian":
             if self.g is None:
                 raise ValueError(f"rule 'laplacian' needs g > N = {n} (eq. 18)")
