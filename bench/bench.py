@@ -48,7 +48,7 @@ PARTS = {
     "grid": {"_bbox_blocks", "_assign", "_scan", "_scatter_serial", "_scatter_parallel",
              "permute_rows", "permute", "_scan_scatter", "max_count", "bucket_aggregates"},
     "observables": {"_arc_buckets", "_largest_gap", "reset_parent", "count_roots", "graph",
-                    "root_labels", "observe", "velocity"},
+                    "flatten", "observe", "velocity"},
     "transfers": {"ndarray_to_ext_arr", "ext_arr_to_ndarray"},
     "fused": {"advance"},
 }

@@ -4,16 +4,20 @@ In 3D the state's vectors have three columns, and the random directions are unif
 sphere (z uniform in [-1, 1], azimuth uniform: Archimedes' hat-box theorem).
 
 Random draws come from numpy's PCG64 seeded with the scenario seed, one double a value, in
-a fixed order: positions (2 N in 2D: x and y, the lattice's jitter, or the disc's radius
-then angle; 3 N in 3D), then the headings (N; 3D: the directions' z, then their azimuths,
-2 N), then the speeds (N). Each array starts its own generator advanced to its place in
-that order (`PCG64.advance`), so an array no model reads is never drawn and none waits on
-another (velocities draw their own headings or directions: a caller may have changed
-those it read): Vicsek's kernel builds positions and headings without velocities, a
-flocking kernel positions and velocities without keeping headings; the bits are those of
-one generator drawing everything in order. Arrays are built in place where the formula allows
-(the same operations on the same operands: the same bits), so at N = 10^6 building the
-state needs little beyond the arrays it returns.
+a fixed order: the positions (2D: 2 N, the x and y of each agent in turn, or the lattice's
+jitter likewise, or the disc's N radii then N angles; 3D: 3 N, the ball's N radii, N z
+and N azimuths of the directions), then the headings (N; 3D: the directions, N z then N
+azimuths), then the N speeds. Each run of draws has its own generator advanced to its
+place in that order (`PCG64.advance`), so an array no model reads is never drawn and none
+waits on another: Vicsek's kernel builds positions and headings without velocities, a
+flocking kernel positions and velocities without headings (velocities draw their own
+headings or directions: a caller may have changed those it read). The bits are those of
+one generator drawing everything in order.
+
+Each array is filled a block of agents at a time, with the same operations on the same
+operands as whole-array numpy code (the same bits), so building the state at N = 10^6
+takes its arrays and no N-sized temporaries (whose freed pages the C allocator would keep
+resident beside the device arrays).
 """
 
 from __future__ import annotations
@@ -25,24 +29,14 @@ import numpy as np
 
 from flocklab.schemas import ExplicitInitial, PeriodicBox, Scenario
 
+from .stream import blocks
+
 
 def _draws(seed: int, skip: int) -> np.random.Generator:
     """The scenario's generator (= np.random.default_rng(seed)) after `skip` doubles."""
     bits = np.random.PCG64(seed)
     bits.advance(skip)
     return np.random.Generator(bits)
-
-
-def sphere_directions(rng: np.random.Generator, n: int) -> np.ndarray:
-    """n unit vectors uniform on the sphere (two draws each: z, then the azimuth)."""
-    z = rng.uniform(-1.0, 1.0, size=n)
-    phi = rng.uniform(-np.pi, np.pi, size=n)
-    rho = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    out = np.empty((n, 3))
-    out[:, 2] = z
-    del z
-    _polar(rho, phi, out)
-    return out
 
 
 def _polar(r: np.ndarray, angle: np.ndarray, out: np.ndarray) -> None:
@@ -53,6 +47,14 @@ def _polar(r: np.ndarray, angle: np.ndarray, out: np.ndarray) -> None:
     np.multiply(r, t, out=out[:, 0])
     np.sin(angle, out=t)
     np.multiply(r, t, out=out[:, 1])
+
+
+def _sphere(zs: np.random.Generator, phis: np.random.Generator, out: np.ndarray) -> None:
+    """Unit vectors into the rows of `out`: z from `zs`, the azimuth from `phis`."""
+    z = zs.uniform(-1.0, 1.0, size=len(out))
+    phi = phis.uniform(-np.pi, np.pi, size=len(out))
+    out[:, 2] = z
+    _polar(np.sqrt(np.maximum(0.0, 1.0 - z * z)), phi, out)
 
 
 def unit_rows(v: np.ndarray) -> np.ndarray:
@@ -80,39 +82,57 @@ class InitialState:
         self.n = scenario.n_agents
         self.explicit = isinstance(self.init, ExplicitInitial)
 
-    def _rng(self, stream: str) -> np.random.Generator:
-        """The generator at the first draw of `stream` (module docstring's order)."""
+    def _rng(self, stream: str, part: int = 0) -> np.random.Generator:
+        """The generator at the first draw of `stream` (module docstring's order), or of
+        its `part`-th run of N draws."""
         n, d = self.n, self.dim
         skip = {"positions": 0, "headings": d * n, "speeds": (2 * d - 1) * n}[stream]
-        return _draws(self.seed, skip)
+        return _draws(self.seed, skip + part * n)
 
     @cached_property
     def positions(self) -> np.ndarray:
         init, d, n = self.init, self.dim, self.n
         if self.explicit:
-            pos = np.array(init.positions, dtype=np.float64).reshape(-1, d)
-        else:
-            rng = self._rng("positions")
-            region = init.region
-            if region is None:  # the whole periodic box (validated: only allowed there)
-                assert isinstance(self.space, PeriodicBox)
-                pos = rng.uniform(0.0, self.space.L, size=(n, d))
-            elif region.kind == "box":
-                pos = rng.uniform(region.low, region.high, size=(n, d))
-            elif region.kind == "lattice":
-                pos = _lattice(rng, region, n, d)
-            elif d == 2:  # disc: radius R sqrt(u), angle uniform
-                rad = region.radius * np.sqrt(rng.uniform(size=n))
-                ang = rng.uniform(-np.pi, np.pi, size=n)
-                pos = np.empty((n, 2))
-                _polar(rad, ang, pos)
-                pos += region.center
+            return _wrap(np.array(init.positions, dtype=np.float64).reshape(-1, d), self.space)
+        region = init.region
+        kind = "box" if region is None else region.kind
+        low, high = (0.0, self.space.L) if region is None else (None, None)
+        if region is not None and kind == "box":
+            low, high = region.low, region.high
+        side = 0
+        if kind == "lattice":
+            side = region.side(n) if d == 3 else math.ceil(math.sqrt(n))
+        # The runs of N draws: the box's or lattice's rows (one run of d N), or the disc's
+        # radii and angles, the ball's radii, z and azimuths.
+        runs = [self._rng("positions", k) for k in range(1 if kind in ("box", "lattice")
+                                                              else d)]
+        pos = np.empty((n, d))
+        for lo, hi in blocks(n):
+            out, m = pos[lo:hi], hi - lo
+            if kind == "box":  # the periodic box when no region is given
+                out[:] = runs[0].uniform(low, high, size=(m, d))
+            elif kind == "lattice":  # low + spacing (grid point + jitter)
+                k = np.arange(lo, hi)
+                out[:, 0] = k % side
+                if d == 2:
+                    out[:, 1] = k // side
+                else:
+                    out[:, 1] = (k // side) % side
+                    out[:, 2] = k // (side * side)
+                out += runs[0].uniform(-region.jitter, region.jitter, size=(m, d))
+                out *= region.spacing
+                out += np.asarray(region.low)
+            elif d == 2:  # disc: radius R sqrt(u), the angle uniform
+                _polar(region.radius * np.sqrt(runs[0].uniform(size=m)),
+                       runs[1].uniform(-np.pi, np.pi, size=m), out)
+                out += region.center
             else:  # ball: a uniform direction at radius R u^(1/3) is uniform in volume
-                rad = region.radius * np.cbrt(rng.uniform(size=n))
-                pos = sphere_directions(rng, n)
-                pos *= rad[:, None]
-                pos += np.asarray(region.center)
-        return _wrap(pos, self.space)
+                r = region.radius * np.cbrt(runs[0].uniform(size=m))
+                _sphere(runs[1], runs[2], out)
+                out *= r[:, None]
+                out += np.asarray(region.center)
+            _wrap(out, self.space)
+        return pos
 
     @cached_property
     def directions(self) -> np.ndarray | None:
@@ -122,7 +142,14 @@ class InitialState:
             return None
         if self.explicit:
             return unit_rows(self._explicit_velocities())
-        return sphere_directions(self._rng("headings"), self.n)
+        return self._directions()
+
+    def _directions(self) -> np.ndarray:
+        out = np.empty((self.n, 3))
+        zs, phis = self._rng("headings"), self._rng("headings", 1)
+        for lo, hi in blocks(self.n):
+            _sphere(zs, phis, out[lo:hi])
+        return out
 
     @cached_property
     def headings(self) -> np.ndarray:
@@ -140,17 +167,23 @@ class InitialState:
 
     @cached_property
     def velocities(self) -> np.ndarray:
+        """speed times the heading's unit vector (3D: the direction), per agent."""
         if self.explicit:
             return self._explicit_velocities()
-        lo, hi = self.init.speed_range
-        speed = self._rng("speeds").uniform(lo, hi, size=self.n)
+        n = self.n
+        speeds = self._rng("speeds")
+        s_lo, s_hi = self.init.speed_range
         if self.dim == 3:
-            vel = sphere_directions(self._rng("headings"), self.n)
-            vel *= speed[:, None]  # = speed[:, None] * directions, bit for bit
+            vel = self._directions()
+            for lo, hi in blocks(n):
+                vel[lo:hi] *= speeds.uniform(s_lo, s_hi, size=hi - lo)[:, None]
             return vel
-        lo, hi = self.init.heading_range
-        vel = np.empty((self.n, 2))
-        _polar(speed, self._rng("headings").uniform(lo, hi, size=self.n), vel)
+        vel = np.empty((n, 2))
+        heads = self._rng("headings")
+        h_lo, h_hi = self.init.heading_range
+        for lo, hi in blocks(n):
+            _polar(speeds.uniform(s_lo, s_hi, size=hi - lo),
+                   heads.uniform(h_lo, h_hi, size=hi - lo), vel[lo:hi])
         return vel
 
     def _explicit_velocities(self) -> np.ndarray:
@@ -163,25 +196,6 @@ class InitialState:
 def initial_state(scenario: Scenario) -> InitialState:
     """The scenario's initial state (arrays built as they are read)."""
     return InitialState(scenario)
-
-
-def _lattice(rng: np.random.Generator, region, n: int, d: int) -> np.ndarray:
-    """low + spacing (grid + jitter): the k-th agent at grid point (k % side, k // side)
-    (3D: (k % side, (k // side) % side, k // side^2)), jitter uniform in +-jitter."""
-    side = math.ceil(math.sqrt(n)) if d == 2 else region.side(n)
-    k = np.arange(n)
-    pos = np.empty((n, d))
-    pos[:, 0] = k % side
-    if d == 2:
-        pos[:, 1] = k // side
-    else:
-        pos[:, 1] = (k // side) % side
-        pos[:, 2] = k // (side * side)
-    del k
-    pos += rng.uniform(-region.jitter, region.jitter, size=(n, d))
-    pos *= region.spacing
-    pos += np.asarray(region.low)
-    return pos
 
 
 def _wrap(pos: np.ndarray, space) -> np.ndarray:
