@@ -27,7 +27,7 @@ class OffsetSchedule:
     def __init__(self, first: FormationSpec, changes: list[FormationChange], n: int, d: float,
                  dim: int = 2):
         self.changes = changes
-        self.dim = dim
+        self.n, self.dim = n, dim
         self._eye = np.eye(dim)
         self.stored = [offsets(first, n, d, dim)]
         # B_c = in_force[c][1] @ stored[in_force[c][0]] (as dim x dim acting on each offset)
@@ -65,11 +65,12 @@ class OffsetSchedule:
         k, m = self.in_force[done]
         return {k: m}
 
-    def at(self, t: float) -> np.ndarray:
-        """b_i(t), (N, dim) in agent-id order."""
-        b = np.zeros_like(self.stored[0])
+    def at(self, t: float, ids: np.ndarray | None = None) -> np.ndarray:
+        """b_i(t), (N, dim) in agent-id order; with `ids`, the rows of those agents."""
+        rows = slice(None) if ids is None else ids
+        b = np.zeros((self.n if ids is None else len(ids), self.dim))
         for k, m in self.weights(t).items():
-            cols = [self.stored[k][:, c] for c in range(self.dim)]
+            cols = [self.stored[k][rows, c] for c in range(self.dim)]
             for r in range(self.dim):
                 # the terms summed left to right, as the 2D-only code wrote them out
                 row = m[r, 0] * cols[0]
