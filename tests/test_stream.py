@@ -97,3 +97,6 @@ def test_rows_reads_device_blocks(taichi_cpu):
         rows = Rows(dev, block=300)
         got = np.concatenate([rows(lo, hi).copy() for lo, hi in blocks(1000, 300)])
         assert got.dtype == host and np.array_equal(got, a)
+        if a.ndim == 2:
+            pick = rng.integers(0, 1000, 300)
+            assert np.array_equal(rows.take(pick), a[pick])

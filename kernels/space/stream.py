@@ -128,6 +128,12 @@ def _copy_items(src: nd, dst: nd, lo: ti.i32):
         dst[k] = src[lo + k]
 
 
+@ti.kernel
+def _take_rows(src: nd, index: nd, dst: nd):
+    for k, c in ti.ndrange(dst.shape[0], dst.shape[1]):
+        dst[k, c] = src[index[k], c]
+
+
 class Rows:
     """Rows lo..hi of a device array (N,) or (N, C) as a numpy array of its type, read into
     one reused buffer of `block` rows (the view is valid until the next read)."""
@@ -140,6 +146,12 @@ class Rows:
     def __call__(self, lo: int, hi: int) -> np.ndarray:
         out = self._buf[:hi - lo]
         (_copy_rows if out.ndim == 2 else _copy_items)(self.src, out, lo)
+        return out
+
+    def take(self, index: np.ndarray) -> np.ndarray:
+        """Rows `index` (at most a block of them, int32) of an (N, C) array, like `__call__`."""
+        out = self._buf[:len(index)]
+        _take_rows(self.src, np.ascontiguousarray(index, dtype=np.int32), out)
         return out
 
     def wide(self, lo: int, hi: int) -> np.ndarray:

@@ -28,6 +28,7 @@ import taichi as ti
 from flocklab.schemas import Scenario
 from flocklab.schemas.formation import FormationParams, SaturatingF
 
+from ... import runtime
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
@@ -237,6 +238,9 @@ class FormationKernel(ModelKernel):
                 free = next(j for j in range(2) if self.b_held[j] not in used)
                 self.b_dev[free].from_numpy(as_real(self.schedule.stored[k]))
                 self.b_held[free] = k
+                if runtime.real() is np.float64 and len(self.schedule.stored) <= 2:
+                    # Held for the whole run and exact on the device: no host copy.
+                    self.schedule.release(k, Rows(self.b_dev[free]).take)
         dim = self.dim
         slots, lead = lead_slots(dim)
         for s, (t, w) in enumerate(zip(times, weights, strict=True)):

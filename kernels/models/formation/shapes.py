@@ -116,7 +116,9 @@ def _cube(n: int) -> np.ndarray:
     while m**3 < n:
         m += 1
     k = np.arange(n)
-    return np.stack([k % m, (k // m) % m, k // (m * m)], axis=1).astype(np.float64)
+    b = np.empty((n, 3))
+    b[:, 0], b[:, 1], b[:, 2] = k % m, (k // m) % m, k // (m * m)
+    return b
 
 
 def _shell(n: int) -> np.ndarray:
@@ -143,10 +145,12 @@ def named_offsets(shape: str, n: int, d: float, orientation: float = 0.0,
                   dim: int = 2) -> np.ndarray:
     """(n, dim) offsets of a named formation with neighbour spacing d, mean zero."""
     if shape in _SHAPES_3D:
-        b = _SHAPES_3D[shape](n) * d
+        b = _SHAPES_3D[shape](n)
+        b *= d
         b -= b.mean(axis=0)
         return b @ rotation3(orientation, (0.0, 0.0, 1.0)).T if orientation else b
-    b = _SHAPES[shape](n) * d
+    b = _SHAPES[shape](n)
+    b *= d
     b -= b.mean(axis=0)
     if orientation:
         b = b @ rotation(orientation).T
