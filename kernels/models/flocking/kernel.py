@@ -243,11 +243,12 @@ class FlockingKernel(ModelKernel):
                   *self.grid.view(), *self.obstacles.view())
             return
         if self.stage is None:
-            n = self.n
-            d = self.dim
-            self.stage = {"pos": _real(n, d), "vel": _real(n, d), "a": _real(n, d),
-                          "rad": _real(n) if self.per_agent_radius else self._no_rad}
-        s, g = self.stage, self.stage_grid
+            self.stage = _real(self.n, self.dim)  # u in the stage grid's order
+        st, g = self.state, self.stage_grid
+        # The stage state in g's order goes to the state's spare buffers: the step writes
+        # them only at its end (rk4_finish), and M3's radius once before the stages.
+        s = {"pos": st.scratch("pos"), "vel": st.scratch("vel"), "a": self.stage,
+             "rad": st.scratch("rad") if self.per_agent_radius else self._no_rad}
         g.build(pos, step)
         permute_rows(pos, s["pos"], g.perm)
         permute_rows(vel, s["vel"], g.perm)
