@@ -277,7 +277,7 @@ class FormationKernel(ModelKernel):
         self.state.sort(self.grid, step)
         if self.cap is None:
             return 1
-        densest = max_count(self.grid.count)
+        densest = max_count(self.grid.start)
         if 9 * densest <= self.cap:
             return 1
         m = stencil_reach(densest)
