@@ -4,11 +4,13 @@
     python -m bench.bench --sizes 1000000 --models vicsek --no-baseline
     python -m bench.bench --sizes 10000000 --models vicsek --precision float32
 
-Each measurement runs in its own process: a warm-up run compiles the kernels, the peak
-resident memory is reset (/proc/self/clear_refs), then the timed run. `peak_bytes_per_agent`
-is the growth of the peak RSS over the warmed-up process, divided by N (no frames are
-recorded). `agent_steps_per_second` counts the stepping loop, observables included, and
-excludes setup (state allocation and upload), reported as `setup_seconds`.
+Each measurement runs in its own process: a warm-up run (20000 agents, or N itself on the
+small-N path) compiles the kernels, the peak resident memory is reset
+(/proc/self/clear_refs), then the timed run. `peak_bytes_per_agent` is the growth of the
+peak RSS over the warmed-up process, divided by N: device arrays, the initial state built
+on the host, observation copies; no frames are recorded (bench/memory.py, shared with
+bench/dimensions.py). `agent_steps_per_second` counts the stepping loop, observables
+included, and excludes setup (state allocation and upload), reported as `setup_seconds`.
 For Vicsek, the same run also times the numpy + scipy cKDTree version a Python user would
 write (`baseline`), and the ratio. `precision` (--precision) is the scenario's.
 
@@ -26,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import collections
-import contextlib
 import importlib
 import json
 import os
@@ -38,6 +39,7 @@ import time
 from pathlib import Path
 
 import bench
+from bench import memory
 
 PROFILE_STEPS = 20  # two observation intervals of every workload
 # Kernel (Python function) names by the part of a step they belong to; "interaction" is
@@ -46,7 +48,7 @@ PARTS = {
     "grid": {"_bbox_blocks", "_assign", "_scan", "_scatter_serial", "_scatter_parallel",
              "permute_rows", "permute", "_scan_scatter", "max_count", "bucket_aggregates"},
     "observables": {"_arc_buckets", "_largest_gap", "reset_parent", "count_roots", "graph",
-                    "root_labels", "observe", "velocity"},
+                    "flatten", "observe", "velocity"},
     "transfers": {"ndarray_to_ext_arr", "ext_arr_to_ndarray"},
     "fused": {"advance"},
 }
@@ -63,13 +65,6 @@ def workloads() -> dict:
 
 def default_steps(n: int) -> int:
     return int(min(3000, max(30, 3e7 / n)))
-
-
-def _peak_rss() -> int:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) * 1024
-    return 0
 
 
 def part_of(record_name: str) -> str:
@@ -104,22 +99,14 @@ def profile_one(label: str, n: int, backend: str, precision: str) -> dict:
 
 
 def measure_one(label: str, n: int, steps: int, backend: str, precision: str) -> dict:
-    """Runs in a child process: warm up, reset the peak RSS, run, report."""
-    from flocklab import kernels
+    """Runs in a child process: warm up, reset the peak RSS, run, report (bench/memory.py)."""
     from flocklab.schemas import Scenario
 
-    spec = workloads()[label](n)
-    spec["backend"] = backend
-    spec["precision"] = precision
-    warm = dict(spec, time=dict(spec["time"], steps=2))
-    kernels.run(Scenario.model_validate(warm))
-    with contextlib.suppress(OSError):  # not Linux: the peak then includes the warm-up
-        Path("/proc/self/clear_refs").write_text("5")  # reset VmHWM to the current RSS
-    base = _peak_rss()
-    spec["time"] = dict(spec["time"], steps=steps)
-    sc = Scenario.model_validate(spec)
-    result = kernels.run(sc)
-    peak = _peak_rss()
+    def scenario_at(size: int, k: int) -> Scenario:
+        spec = dict(workloads()[label](size), backend=backend, precision=precision)
+        return Scenario.model_validate(dict(spec, time=dict(spec["time"], steps=k)))
+
+    result, per_agent = memory.measured_run(scenario_at, n, steps)
     loop = result.wall_seconds - result.extra.get("setup_seconds", 0.0)
     model, _, rule = label.partition("/")
     return {
@@ -127,7 +114,7 @@ def measure_one(label: str, n: int, steps: int, backend: str, precision: str) ->
         "backend": result.backend, "precision": precision, "status": result.status,
         "seconds": round(loop, 4), "setup_seconds": round(result.extra.get("setup_seconds", 0), 4),
         "agent_steps_per_second": round(n * result.steps / loop),
-        "peak_bytes_per_agent": round((peak - base) / n, 1),
+        "peak_bytes_per_agent": round(per_agent, 1),
     }
 
 

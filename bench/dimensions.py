@@ -12,21 +12,20 @@ neighbours within R = 2 against 12 in 2D), the formation's square of one agent p
 a cube of one per d^3, its hexagonal formation a cubic lattice, its leader's target
 (x, 0, 0). The rate is the difference of a 5-step and a (5 + STEPS)-step run, which cancels
 set-up: meant for N >= 10^5, where the steps dominate. Each (model, dimension, precision)
-runs in a fresh process so that its peak resident memory, less that of the same process
-after a 2-step run at N = 1000 (imports, Taichi, compiled kernels), divided by N is the
-bytes per agent the run itself needs.
+runs in a fresh process; its memory is counted as bench/bench.py counts it
+(bench/memory.py): the peak resident memory of one 5-step run at N, less that of the
+process warmed at 20000 agents (imports, Taichi, compiled kernels), divided by N.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import resource
 import subprocess
 import sys
 import time
 
-from bench import workload_flocking, workload_formation
+from bench import memory, workload_flocking, workload_formation
 
 
 def vicsek(n: int, dim: int) -> dict:
@@ -83,8 +82,10 @@ def one(label: str, n: int, dim: int, steps: int, precision: str) -> dict:
         doc["precision"] = precision
         return Scenario.model_validate(doc)
 
-    kernels.run(scenario(1000, 2))  # compile (or load) the kernels on a small swarm
-    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    # The memory: one run of 5 steps (set-up and two observations) in the warmed process.
+    res, per_agent = memory.measured_run(scenario, n, 5)
+    if res.status != "completed":
+        return {"model": label, "dim": dim, "status": res.status, "error": res.error}
     times = []
     for k in (5, 5 + steps):  # the difference cancels set-up and the first observation
         t = time.perf_counter()
@@ -92,11 +93,10 @@ def one(label: str, n: int, dim: int, steps: int, precision: str) -> dict:
         times.append(time.perf_counter() - t)
         if res.status != "completed":
             return {"model": label, "dim": dim, "status": res.status, "error": res.error}
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     return {"model": label, "dim": dim, "precision": precision, "N": n, "steps": steps,
             "engine_path": res.extra["engine_path"],
             "agent_steps_per_s": round(n * steps / (times[1] - times[0])),
-            "bytes_per_agent": round((peak - base) / n)}
+            "bytes_per_agent": round(per_agent)}
 
 
 def main(argv: list[str] | None = None) -> int:

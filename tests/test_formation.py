@@ -10,7 +10,7 @@ from pydantic import ValidationError
 
 from flocklab import kernels
 from flocklab.kernels.models.formation.path import make_path
-from flocklab.kernels.models.formation.props import at_leader, d2_isolated, d3_holds, roots
+from flocklab.kernels.models.formation.props import Isolated, d3_holds
 from flocklab.kernels.models.formation.schedule import OffsetSchedule
 from flocklab.kernels.models.formation.shapes import named_offsets
 from flocklab.schemas import Scenario
@@ -327,18 +327,31 @@ def test_d3_connected_formation_around_the_leader():
 
 
 def test_d2_exempts_only_the_agent_at_the_leader():
-    rel = np.array([[1e-4, 0.0], [5.0, 0.0], [-5.0, 0.0], [50.0, 50.0]])
-    k = at_leader(rel, 0.2)
-    assert k == 0
-    assert d2_isolated(np.array([0, 1, 1, 0]), k) == 1
-    assert d2_isolated(np.array([0, 1, 1, 1]), k) == 0
-    assert at_leader(rel[1:], 0.2) == -1
-    assert d2_isolated(np.array([0, 1, 1]), -1) == 1
+    """The agent nearest r^, if within the tolerance, may lack a neighbour; the count
+    follows it across blocks."""
+    dist = np.array([5.0, 1e-4, 5.0, 70.0])
+
+    def isolated(degree, blocks=((0, 4),), tol=0.2):
+        d2 = Isolated(tol)
+        for lo, hi in blocks:
+            d2.add(dist[lo:hi], np.asarray(degree)[lo:hi])
+        return d2.count()
+
+    assert isolated([1, 0, 1, 0]) == 1
+    assert isolated([1, 0, 1, 0], blocks=((0, 1), (1, 3), (3, 4))) == 1
+    assert isolated([0, 1, 1, 1]) == 1
+    assert isolated([1, 0, 1, 0], tol=1e-5) == 2  # nobody at r^: no exemption
 
 
-def test_union_find_roots():
-    parent = np.array([0, 0, 1, 2, 4, 4, 5])
-    assert roots(parent).tolist() == [0, 0, 0, 0, 4, 4, 4]
+def test_flatten_gives_every_node_its_root(taichi_cpu):
+    import taichi as ti
+
+    from flocklab.kernels.space.graph import flatten
+
+    parent = ti.ndarray(ti.i32, shape=7)
+    parent.from_numpy(np.array([0, 0, 1, 2, 4, 4, 5], dtype=np.int32))
+    flatten(parent)
+    assert parent.to_numpy().tolist() == [0, 0, 0, 0, 4, 4, 4]
 
 
 # --- formations, schedule, paths --------------------------------------------------------

@@ -14,6 +14,7 @@ from scipy.optimize import brentq
 from scipy.sparse.csgraph import connected_components
 
 from flocklab import kernels
+from flocklab.kernels.models.flocking.navigation import nav_eval_kernel
 from flocklab.schemas import PRESETS, Scenario
 from tests.test_flocking_reference import (
     fused_or_skip,
@@ -33,7 +34,8 @@ def nav_at(k, points: np.ndarray) -> np.ndarray:
     pts = ti.ndarray(ti.f64, shape=points.shape)
     pts.from_numpy(np.ascontiguousarray(points))
     out = ti.ndarray(ti.f64, shape=(len(points), 4))
-    k.nav_k(pts, out, k.nav, *k.obstacles.view())
+    nav_eval_kernel(k.flags["has_obstacles"], k.flags["unit_kappa"], k.dim)(
+        pts, out, k.nav, *k.obstacles.view())
     return out.to_numpy()
 
 

@@ -65,6 +65,15 @@ def reset_parent(parent: nd):
 
 
 @ti.kernel
+def flatten(parent: nd):
+    """parent[i] = the root of i's tree, in place: the forest's component labels without a
+    second array. Safe in parallel: a concurrent find only moves a pointer up its own tree,
+    whose root no thread changes."""
+    for i in range(parent.shape[0]):
+        parent[i] = find(parent, i)
+
+
+@ti.kernel
 def count_roots(parent: nd) -> ti.i32:
     n = 0
     for i in range(parent.shape[0]):

@@ -63,7 +63,10 @@ def _scan_scatter(key: nd, count: nd, start: nd, perm: nd, n_cells: ti.i32):
 
 
 class DenseGrid:
-    """Row-major cells of side `radius` over the current bounding box (CPU)."""
+    """Row-major cells of side `radius` over the current bounding box (CPU). The per-cell
+    arrays hold the cells the swarm spans, a quarter more, and grow when a build needs
+    more (a swarm at the density of its interaction range spans a few cells per 10
+    agents: sizing them for the cap, 4 per agent, took 32 B/agent)."""
 
     def __init__(self, n: int, radius: float):
         self.n = n
@@ -72,8 +75,9 @@ class DenseGrid:
         self.max_cells = CELLS_PER_AGENT * n + 16
         self.key = ti.ndarray(ti.i32, shape=n)
         self.perm = ti.ndarray(ti.i32, shape=n)
-        self.count = ti.ndarray(ti.i32, shape=self.max_cells)
-        self.start = ti.ndarray(ti.i32, shape=self.max_cells + 1)
+        self.cells = 0  # the cells `count` and `start` have room for
+        self.count: ti.Ndarray | None = None
+        self.start: ti.Ndarray | None = None
         self.gf = ti.ndarray(float, shape=3)
         self.gi = ti.ndarray(ti.i32, shape=2)
         self._bb_part = bbox_buffer(n)
@@ -93,11 +97,20 @@ class DenseGrid:
         ny = int((y1 - y0) / self.cell) + 2
         if nx * ny > self.max_cells:
             return False
+        self._reserve(nx * ny)
         self.gf.from_numpy(runtime.as_real([self.cell, x0, y0]))
         self.gi.from_numpy(np.array([nx, ny], dtype=np.int32))
         _assign(pos, self.key, self.count, self.gf, self.gi)
         _scan_scatter(self.key, self.count, self.start, self.perm, nx * ny)
         return True
+
+    def _reserve(self, cells: int) -> None:
+        """Room for `cells` cells (the old arrays freed before the new are made)."""
+        if cells > self.cells:
+            self.count = self.start = None
+            self.cells = min(self.max_cells, cells + cells // 4 + 16)
+            self.count = ti.ndarray(ti.i32, shape=self.cells)
+            self.start = ti.ndarray(ti.i32, shape=self.cells + 1)
 
     def view(self) -> tuple:
         """Static tuple for kernels, shaped like grid.Grid.view(): (start, -, gf, gi)."""

@@ -229,15 +229,6 @@ def csr_potential(pos: nd, indptr: nd, indices: nd, prm: nd, pot: nd, dim: ti.te
         pot[i] = acc
 
 
-@ti.kernel
-def root_labels(parent: nd, labels: nd):
-    """labels[i] = the root of i's tree (its connected component)."""
-    for i in range(parent.shape[0]):
-        labels[i] = find(parent, i)
-
-
-
-
 @ti.func
 def Observation(a, b, c, d, e, f):
     """Six floats of the runtime's type (a module-level ti.types.vector would fix it at
@@ -248,10 +239,14 @@ O_DEG, O_NEAR_D2, O_NEAR_K, O_VSUM, O_NSAT, O_ROOT = range(6)
 
 @cache
 def grid_observe_kernel(rule: int, inclusive: bool, search: str, dim: int = 2):
-    """Kernel writing, per agent (grid order): valency |N_i|, the nearest agent among the
-    visited candidates (squared distance and slot), sum_{j != i} (U_ij - V(R_ij)) (the
-    saturated potential less its constant), and the union of every edge into `parent`
-    (i's root found once and carried along, as in kernels/space/graph.py)."""
+    """Kernel writing, per agent (grid order): the nearest agent among the visited
+    candidates (squared distance and slot), sum_{j != i} (U_ij - V(R_ij)) (the saturated
+    potential less its constant), valency |N_i|, and the union of every edge into `parent`
+    (i's root found once and carried along, as in kernels/space/graph.py). The values go
+    into two (N, dim) arrays of the float type, the step's spare state buffers (dead
+    between an observation and the step): near[i] = (nearest d^2, potential sum),
+    counts[i] = (valency, nearest slot), counts exact in the float type (as they are in
+    the accumulator) up to 2^24 in float32."""
 
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):
@@ -281,20 +276,20 @@ def grid_observe_kernel(rule: int, inclusive: bool, search: str, dim: int = 2):
     visit = visitor(pair, search, dim)
 
     @ti.kernel
-    def observe(pos: nd, rad: nd, prm: nd, parent: nd, deg: nd, near_d2: nd, near_k: nd,
-                pot: nd, start: nd, cid: nd, gf: nd, gi: nd):
+    def observe(pos: nd, rad: nd, prm: nd, parent: nd, near: nd, counts: nd,
+                start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
             xi = row(pos, i, dim)
             acc = Observation(0.0, NEAREST_NONE, -1.0, 0.0, 0.0,
                               ti.cast(find(parent, i), float))
             acc = visit(i, xi, acc, pos, ti.static((start, cid, gf, gi)),
                         ti.static((rad, prm, parent)), False)
-            deg[i] = ti.cast(acc[O_DEG], ti.i32)
-            near_d2[i] = acc[O_NEAR_D2]
-            near_k[i] = ti.cast(acc[O_NEAR_K], ti.i32)
             # V(R_i) once per agent: R_i is R (uniform) or agent i's own radius.
             r2 = pair_radius2(rule, i, i, rad, prm)
-            pot[i] = acc[O_VSUM] - acc[O_NSAT] * potentials.value(r2, prm[P.A], prm[P.C])
+            near[i, 0] = acc[O_NEAR_D2]
+            near[i, 1] = acc[O_VSUM] - acc[O_NSAT] * potentials.value(r2, prm[P.A], prm[P.C])
+            counts[i, 0] = acc[O_DEG]
+            counts[i, 1] = acc[O_NEAR_K]
 
     return observe
 

@@ -28,7 +28,7 @@ from flocklab.schemas import Scenario
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
-from ...space.graph import count_roots, reset_parent
+from ...space.graph import count_roots, flatten, reset_parent
 from ...space.grid import Grid, permute, permute_rows
 from ...space.initial import InitialState, initial_state, unit_rows
 from ...space.integrate import (
@@ -40,6 +40,7 @@ from ...space.integrate import (
 )
 from ...space.plane_grid import PlaneGrid
 from ...space.state import SortedState
+from ...space.stream import ArgMin, PairwiseSum, Rows, blocks
 from . import observe as fo
 from .forces import (
     NO_DAMPING,
@@ -50,7 +51,6 @@ from .forces import (
     csr_potential,
     grid_kernels,
     grid_observe_kernel,
-    root_labels,
 )
 from .fused import FlockingBatch
 from .navigation import NAV, ObstacleGrid
@@ -88,7 +88,6 @@ class FlockingKernel(ModelKernel):
         self.prm = _real(P.size)
         self.prm.from_numpy(as_real(self._parameters()))
         self.bad = _i32(1)
-        self.pot = _real(n)
         self.closest: dict[str, Any] = {}
         if self.fixed:
             self._init_graph(scenario)
@@ -141,6 +140,7 @@ class FlockingKernel(ModelKernel):
         if len(indices):
             self.indices.from_numpy(indices)
         self.fixed_degree = np.diff(indptr).astype(np.int32)  # agent-id order, for ever
+        self.pot = _real(n)  # V_i of eq. 4, at observations
         adj = fo.graph_matrix(n, u, v)
         n_comp = fo.components(adj)
         self.graph_info = {
@@ -166,9 +166,7 @@ class FlockingKernel(ModelKernel):
         self.stage_grid = self._new_grid(n, r) if rk4_grid else None
         self.per_agent_radius = flags["rule"] != RADIUS_RULES["uniform"]
         self._no_rad = _real(1)
-        self.parent, self.labels = _i32(n), _i32(n)
-        self.deg, self.near_k = _i32(n), _i32(n)
-        self.near_d2 = _real(n)
+        self.parent = _i32(n)  # the metric graph's union-find forest, at observations
         self.stage = None
 
     def _new_grid(self, n: int, r: float) -> PlaneGrid | Grid:
@@ -245,11 +243,12 @@ class FlockingKernel(ModelKernel):
                   *self.grid.view(), *self.obstacles.view())
             return
         if self.stage is None:
-            n = self.n
-            d = self.dim
-            self.stage = {"pos": _real(n, d), "vel": _real(n, d), "a": _real(n, d),
-                          "rad": _real(n) if self.per_agent_radius else self._no_rad}
-        s, g = self.stage, self.stage_grid
+            self.stage = _real(self.n, self.dim)  # u in the stage grid's order
+        st, g = self.state, self.stage_grid
+        # The stage state in g's order goes to the state's spare buffers: the step writes
+        # them only at its end (rk4_finish), and M3's radius once before the stages.
+        s = {"pos": st.scratch("pos"), "vel": st.scratch("vel"), "a": self.stage,
+             "rad": st.scratch("rad") if self.per_agent_radius else self._no_rad}
         g.build(pos, step)
         permute_rows(pos, s["pos"], g.perm)
         permute_rows(vel, s["vel"], g.perm)
@@ -265,78 +264,89 @@ class FlockingKernel(ModelKernel):
     def observe(self, step: int) -> dict[str, float]:
         self._sort(step)
         st = self.state
-        pos, vel = wide(st["pos"]), wide(st["vel"])
-        obs = fo.velocity_stats(vel)
-        kinetic = 0.5 * float((vel * vel).sum())
+        obs, kinetic = fo.velocity_stats(st["vel"])
         if self.fixed:
             csr_potential(st["pos"], self.indptr, self.indices, self.prm, self.pot, self.dim)
             obs["W"] = 0.5 * float(wide(self.pot).sum()) + kinetic  # eq. 5
             obs.update(self.graph_obs)
-            self._closest(step, *fo.closest_pair(pos), obs)
+            self._closest(step, *fo.closest_pair(wide(st["pos"])), obs)
         else:
-            obs.update(self._observe_grid(pos, vel, step, kinetic))
+            obs.update(self._observe_grid(step, kinetic))
         return obs
 
-    def _observe_grid(self, pos: np.ndarray, vel: np.ndarray, step: int,
-                      kinetic: float) -> dict[str, float]:
+    def _observe_grid(self, step: int, kinetic: float) -> dict[str, float]:
         st = self.state
-        ids = st.ids_numpy()
-        deg = self._grid_valencies(ids)
+        n = self.n
+        near, counts = self._grid_observation()
         n_comp = count_roots(self.parent)
-        reduced = 0.5 * float(wide(self.pot).sum()) + kinetic
+        pot, nearest = PairwiseSum(n), ArgMin()
+        val = fo.Valencies(n, self.p.valency_per_agent_max)
+        near_rows, count_rows = Rows(near), Rows(counts)
+        for lo, hi in blocks(n):
+            x = near_rows.wide(lo, hi)
+            nearest.add(x[:, 0])
+            pot.add(x[:, 1])
+            val.add(count_rows(lo, hi)[:, 0].astype(np.int32))
+        reduced = 0.5 * pot.total() + kinetic
         obs = {"Q_reduced": reduced, "Q": reduced + self._q_constant(),
                "components": float(n_comp)}
-        obs.update(fo.valency_stats(deg, self.p.valency_per_agent_max))
+        obs.update(val.stats(self._by_id(counts) if val.per_agent else None))
         # The 3x3 (3x3x3) cells hold every pair closer than the grid radius: exact below it.
-        d2 = wide(self.near_d2)
-        k = int(np.argmin(d2))
-        if self.all_pairs or d2[k] < self.grid_radius**2:
-            j = int(self.near_k.to_numpy()[k])
-            self._closest(step, float(np.sqrt(d2[k])), int(ids[k]), int(ids[j]), obs)
+        k = nearest.index
+        if self.all_pairs or nearest.value < self.grid_radius**2:
+            j = int(counts[k, 1])
+            self._closest(step, float(np.sqrt(nearest.value)), int(st.ids[k]), int(st.ids[j]),
+                          obs)
         else:
-            dist, a, b = fo.closest_pair(pos)
+            ids = st.ids_numpy()
+            dist, a, b = fo.closest_pair(wide(st["pos"]))
             self._closest(step, dist, int(ids[a]), int(ids[b]), obs)
         lam = fo.NOT_COMPUTED
         if self.n <= self.p.lambda2_max_agents:
             radii = wide(st["rad"]) if self.per_agent_radius else self.grid_radius
             rule = "own" if self.flags["rule"] == RADIUS_RULES["own"] else "min"
-            u, v = fo.proximity_edges(pos, radii, rule, self.flags["inclusive"])
+            u, v = fo.proximity_edges(wide(st["pos"]), radii, rule, self.flags["inclusive"])
             lam = fo.algebraic_connectivity(fo.graph_matrix(self.n, u, v), n_comp,
                                             self.p.lambda2_max_agents)
         obs["lambda2"] = lam
         return obs
 
-    def _grid_valencies(self, ids: np.ndarray) -> np.ndarray:
-        """Run the observation kernel on the sorted state (valencies |N_i|, nearest
-        candidates, saturated potentials, components into `parent`); the valencies in
-        agent-id order (`ids`: the agent in each slot)."""
+    def _grid_observation(self) -> tuple[ti.Ndarray, ti.Ndarray]:
+        """Run the observation kernel on the sorted state: components into `parent`, and
+        (nearest d^2, potential sum) and (valency, nearest slot) per slot into the step's
+        spare position and velocity buffers (dead until the step writes them), returned."""
         st = self.state
         reset_parent(self.parent)
         observe = grid_observe_kernel(self.flags["rule"], self.flags["inclusive"],
                                       self._search(self.grid), self.dim)
-        observe(st["pos"], self._rad(), self.prm, self.parent, self.deg, self.near_d2,
-                self.near_k, self.pot, *self.grid.view())
+        near, counts = st.scratch("pos"), st.scratch("vel")
+        observe(st["pos"], self._rad(), self.prm, self.parent, near, counts,
+                *self.grid.view())
+        return near, counts
+
+    def _by_id(self, counts: ti.Ndarray) -> np.ndarray:
+        """The valencies in agent-id order (the first column of `counts`, slot order)."""
         deg = np.empty(self.n, dtype=np.int32)
-        deg[ids] = self.deg.to_numpy()
+        deg[self.state.ids_numpy()] = counts.to_numpy()[:, 0].astype(np.int32)
         return deg
 
     def derived_arrays(self, step: int, names: list[str]) -> dict[str, np.ndarray]:
         """degree: |N_i| as the valency observables count it (the fixed graph's degree, or
         the metric graph's from the same observation kernel); radius (M3): R_i."""
         self._sort(step)  # the sort step(step) would do: no bit of the run changes
-        ids = self.state.ids_numpy()
         out = {}
         if "degree" in names:
             out["degree"] = (self.fixed_degree.copy() if self.fixed
-                             else self._grid_valencies(ids))
+                             else self._by_id(self._grid_observation()[1]))
         if "radius" in names:
-            out["radius"] = self.state.in_id_order("rad", ids)
+            out["radius"] = self.state.in_id_order("rad")
         return out
 
     def component_labels(self) -> np.ndarray:
-        """Connected-component label of each slot, from the last observation's union-find."""
-        root_labels(self.parent, self.labels)
-        return self.labels.to_numpy()
+        """Connected-component label (a root slot) of each slot, from the last
+        observation's union-find forest, flattened in place."""
+        flatten(self.parent)
+        return self.parent.to_numpy()
 
     def _closest(self, step: int, dist: float, i: int, j: int, obs: dict[str, float]) -> None:
         i, j = min(i, j), max(i, j)

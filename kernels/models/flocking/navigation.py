@@ -158,8 +158,9 @@ def make_navigation(has_obstacles: bool, unit_kappa: bool, dim: int = 2):
 
 
 @cache
-def nav_eval_kernel(has_obstacles: bool, unit_kappa: bool, dim: int = 2):
-    """Kernel out[i] = (V, grad V, min delta) at points[i]."""
+def nav_eval_kernel(has_obstacles: bool, unit_kappa: bool, dim: int = 2, grad: bool = True):
+    """Kernel out[i] = (V, grad V, min delta) at points[i]; without `grad`, (V, min delta)
+    in out's first two columns (what the observables and the adaptive radius read)."""
     navigation = make_navigation(has_obstacles, unit_kappa, dim)
 
     @ti.kernel
@@ -168,7 +169,11 @@ def nav_eval_kernel(has_obstacles: bool, unit_kappa: bool, dim: int = 2):
         for i in range(points.shape[0]):
             r = navigation(row(points, i, dim), nav,
                            ti.static((opos, orad, start, cid, gf, gi)))
-            for c in ti.static(range(dim + 2)):
-                out[i, c] = r[c]
+            if ti.static(grad):
+                for c in ti.static(range(dim + 2)):
+                    out[i, c] = r[c]
+            else:
+                out[i, 0] = r[0]
+                out[i, 1] = r[dim + 1]
 
     return nav_eval

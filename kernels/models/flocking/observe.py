@@ -8,95 +8,158 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+import taichi as ti
 from scipy.sparse.csgraph import connected_components, laplacian
 from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 from scipy.spatial import cKDTree
 
 from ...space.observables import circular_spread
+from ...space.stream import PairwiseSum, Rows, RowSum, blocks
 
 HIST_BINS = 16  # valency_hist_0 .. valency_hist_15, then valency_hist_16plus
 DENSE_EIG_MAX = 32  # dense eigvalsh up to this N; sparse shift-invert (faster) above
 NOT_COMPUTED = -1.0
 
 
-def velocity_stats(vel: np.ndarray) -> dict[str, float]:
-    """Mean velocity, disagreement sum_i |v_i - mean|^2 and max_i |v_i - mean|, speeds, and
-    the circular spread of the headings."""
-    mean = vel.mean(axis=0)
-    dev2 = ((vel - mean) ** 2).sum(axis=1)
-    if vel.shape[1] == 3:
-        return velocity_stats_3d(vel, mean, dev2)
-    speed = np.hypot(vel[:, 0], vel[:, 1])
-    return {
-        "mean_velocity_x": float(mean[0]),
-        "mean_velocity_y": float(mean[1]),
-        "velocity_disagreement": float(dev2.sum()),
-        "velocity_disagreement_max": float(np.sqrt(dev2.max())),
-        "speed_min": float(speed.min()),
-        "speed_mean": float(speed.mean()),
-        "speed_max": float(speed.max()),
-        "heading_spread": circular_spread(np.arctan2(vel[:, 1], vel[:, 0])),
-    }
-
-
-def velocity_stats_3d(vel: np.ndarray, mean: np.ndarray, dev2: np.ndarray
-                      ) -> dict[str, float]:
-    """`velocity_stats` in 3D: mean_velocity_z joins _x and _y; the heading spread is twice
-    the largest angle between a velocity's direction and the mean direction (2 pi when the
-    mean is zero; zero velocities count as the x axis)."""
-    speed = np.linalg.norm(vel, axis=1)
-    e = np.zeros_like(vel)
+def _unit(v: np.ndarray, speed: np.ndarray) -> np.ndarray:
+    """Each velocity over its speed; a zero velocity counts as the x axis."""
+    e = np.zeros_like(v)
     e[:, 0] = 1.0
     moving = speed > 0
-    e[moving] = vel[moving] / speed[moving, None]
-    s = e.sum(axis=0)
-    norm = float(np.linalg.norm(s))
-    spread = 2 * np.pi
-    if norm > 0:
-        spread = float(2 * np.arccos(np.clip((e @ (s / norm)).min(), -1.0, 1.0)))
-    return {
-        "mean_velocity_x": float(mean[0]),
-        "mean_velocity_y": float(mean[1]),
-        "mean_velocity_z": float(mean[2]),
-        "velocity_disagreement": float(dev2.sum()),
-        "velocity_disagreement_max": float(np.sqrt(dev2.max())),
-        "speed_min": float(speed.min()),
-        "speed_mean": float(speed.mean()),
-        "speed_max": float(speed.max()),
+    e[moving] = v[moving] / speed[moving, None]
+    return e
+
+
+def _speed(v: np.ndarray) -> np.ndarray:
+    return np.hypot(v[:, 0], v[:, 1]) if v.shape[1] == 2 else np.linalg.norm(v, axis=1)
+
+
+def velocity_stats(vel: ti.Ndarray) -> tuple[dict[str, float], float]:
+    """Mean velocity, disagreement sum_i |v_i - mean|^2 and max_i |v_i - mean|, speeds, the
+    heading spread, and (second) the kinetic energy 1/2 sum_i |v_i|^2, from the device
+    array (N, dim) read in blocks (kernels/space/stream.py: numpy's bits on the whole
+    array). In 2D the spread is the circular spread of the headings; in 3D twice the
+    largest angle between a velocity's direction and the mean direction (2 pi when the
+    mean is zero; zero velocities count as the x axis)."""
+    n, dim = vel.shape
+    rows = Rows(vel)
+    total, kinetic, speeds = RowSum(), PairwiseSum(n * dim), PairwiseSum(n)
+    speed_min, speed_max = np.inf, -np.inf
+    dirs = RowSum()
+    theta = np.empty(n) if dim == 2 else None
+    for lo, hi in blocks(n):
+        v = rows.wide(lo, hi)
+        total.add(v)
+        kinetic.add(v * v)
+        speed = _speed(v)
+        speeds.add(speed)
+        speed_min = np.minimum(speed_min, speed.min())
+        speed_max = np.maximum(speed_max, speed.max())
+        if theta is not None:
+            theta[lo:hi] = np.arctan2(v[:, 1], v[:, 0])
+        else:
+            dirs.add(_unit(v, speed))
+    mean = total.total() / n
+    axis = None
+    if theta is None:
+        s = dirs.total()
+        norm = float(np.linalg.norm(s))
+        axis = s / norm if norm > 0 else None
+    dev2_sum, dev2_max, cos_min = PairwiseSum(n), -np.inf, np.inf
+    for lo, hi in blocks(n):
+        v = rows.wide(lo, hi)
+        dev2 = ((v - mean) ** 2).sum(axis=1)
+        dev2_sum.add(dev2)
+        dev2_max = np.maximum(dev2_max, dev2.max())
+        if axis is not None:
+            cos_min = np.minimum(cos_min, (_unit(v, _speed(v)) @ axis).min())
+    if theta is not None:
+        spread = circular_spread(theta, overwrite=True)
+    else:
+        spread = 2 * np.pi if axis is None else float(2 * np.arccos(np.clip(cos_min, -1.0, 1.0)))
+    stats = {f"mean_velocity_{c}": float(mean[k]) for k, c in enumerate("xyz"[:dim])}
+    stats.update({
+        "velocity_disagreement": dev2_sum.total(),
+        "velocity_disagreement_max": float(np.sqrt(dev2_max)),
+        "speed_min": float(speed_min),
+        "speed_mean": speeds.total() / n,
+        "speed_max": float(speed_max),
         "heading_spread": spread,
-    }
+    })
+    return stats, 0.5 * kinetic.total()
 
 
-def component_disagreement(vel: np.ndarray, labels: np.ndarray) -> dict[str, float]:
+def component_disagreement(vel: ti.Ndarray, labels: np.ndarray) -> dict[str, float]:
     """Velocity disagreement within each connected component (paper 002: each component
     synchronises on its own): the sum over components and the largest |v_i - mean_k|.
-    labels[i] in [0, N) names agent i's component."""
-    # labels are slots of the component roots, in [0, N): bincount needs no relabelling.
-    cnt = np.maximum(np.bincount(labels, minlength=len(labels)), 1).astype(np.float64)
-    mean = np.stack([np.bincount(labels, vel[:, c], len(labels)) / cnt
-                     for c in range(vel.shape[1])], axis=1)
-    dev2 = ((vel - mean[labels]) ** 2).sum(axis=1)
+    labels[i] in [0, N) names the component of the agent in slot i; the velocities are
+    read from the device in blocks. Each component's sum adds its members' velocities in
+    slot order from zero (np.add.at: np.bincount's order), so the bits are those of
+    np.bincount on whole arrays."""
+    n, dim = vel.shape
+    rows = Rows(vel)
+    cnt = np.zeros(n)
+    np.add.at(cnt, labels, 1.0)
+    np.maximum(cnt, 1.0, out=cnt)
+    means = [np.zeros(n) for _ in range(dim)]
+    for lo, hi in blocks(n):
+        v = rows.wide(lo, hi)
+        for c in range(dim):
+            np.add.at(means[c], labels[lo:hi], v[:, c])
+    for m in means:
+        m /= cnt
+    del cnt
+    dev2_sum, dev2_max = PairwiseSum(n), -np.inf
+    for lo, hi in blocks(n):
+        v = rows.wide(lo, hi)
+        lab = labels[lo:hi]
+        dev2 = ((v - np.stack([m[lab] for m in means], axis=1)) ** 2).sum(axis=1)
+        dev2_sum.add(dev2)
+        dev2_max = np.maximum(dev2_max, dev2.max())
     return {
-        "velocity_disagreement_components": float(dev2.sum()),
-        "velocity_disagreement_components_max": float(np.sqrt(dev2.max())),
+        "velocity_disagreement_components": dev2_sum.total(),
+        "velocity_disagreement_components_max": float(np.sqrt(dev2_max)),
     }
+
+
+class Valencies:
+    """Summary of the valencies |N_i| fed in blocks (slot order: every statistic but the
+    per-agent one is order-free, and the integer sums are exact in any order); each
+    agent's own valency (Fig. 6 of paper 000) at N <= per_agent_max, given in agent-id
+    order to `stats`, else a fixed-bin histogram."""
+
+    def __init__(self, n: int, per_agent_max: int):
+        self.n, self.per_agent = n, n <= per_agent_max
+        self.total, self.low, self.high = 0, None, None
+        self.hist = np.zeros(HIST_BINS + 1, dtype=np.int64)
+
+    def add(self, deg: np.ndarray) -> None:
+        if len(deg):
+            self.total += int(deg.sum(dtype=np.int64))
+            lo, hi = int(deg.min()), int(deg.max())
+            self.low = lo if self.low is None else min(self.low, lo)
+            self.high = hi if self.high is None else max(self.high, hi)
+            self.hist += np.bincount(np.minimum(deg, HIST_BINS), minlength=HIST_BINS + 1)
+
+    def stats(self, by_id: np.ndarray | None = None) -> dict[str, float]:
+        out = {
+            "valency_mean": self.total / self.n,
+            "valency_min": float(self.low),
+            "valency_max": float(self.high),
+        }
+        if self.per_agent:
+            out.update({f"valency_{i}": float(k) for i, k in enumerate(by_id)})
+        else:
+            out.update({f"valency_hist_{k}": float(self.hist[k]) for k in range(HIST_BINS)})
+            out[f"valency_hist_{HIST_BINS}plus"] = float(self.hist[HIST_BINS])
+        return out
 
 
 def valency_stats(deg: np.ndarray, per_agent_max: int) -> dict[str, float]:
-    """Summary of the valencies |N_i| (deg in agent-id order); each agent's own valency
-    (Fig. 6 of paper 000) at N <= per_agent_max, else a fixed-bin histogram."""
-    out = {
-        "valency_mean": float(deg.mean()),
-        "valency_min": float(deg.min()),
-        "valency_max": float(deg.max()),
-    }
-    if len(deg) <= per_agent_max:
-        out.update({f"valency_{i}": float(k) for i, k in enumerate(deg)})
-    else:
-        hist = np.bincount(np.minimum(deg, HIST_BINS), minlength=HIST_BINS + 1)
-        out.update({f"valency_hist_{k}": float(hist[k]) for k in range(HIST_BINS)})
-        out[f"valency_hist_{HIST_BINS}plus"] = float(hist[HIST_BINS])
-    return out
+    """`Valencies` of a whole array in agent-id order."""
+    v = Valencies(len(deg), per_agent_max)
+    v.add(deg)
+    return v.stats(deg)
 
 
 def graph_matrix(n: int, u: np.ndarray, v: np.ndarray) -> sp.csr_matrix:

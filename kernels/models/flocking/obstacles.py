@@ -16,12 +16,14 @@ or copies a neighbour's radius), so the 3x3 cells always hold N_i.
 from typing import Any
 
 import numpy as np
+import taichi as ti
 
 from flocklab.schemas import Scenario
 
 from ...model import register_kernel
 from ...runtime import DevicePolicy, as_real, wide
 from ...space.initial import InitialState
+from ...space.stream import PairwiseSum, Rows, blocks
 from . import observe as fo
 from .forces import DAMPING, RADIUS_RULES, P, radius_kernel
 from .kernel import FlockingKernel, _i32, _real
@@ -35,9 +37,8 @@ class ObstacleFlockingKernel(FlockingKernel):
     def __init__(self, scenario: Scenario, policy: DevicePolicy):
         super().__init__(scenario, policy)
         p = self.p
-        self.nav_k = nav_eval_kernel(self.flags["has_obstacles"], self.flags["unit_kappa"],
-                                     self.dim)
-        self.mission = _real(self.n, self.dim + 2)  # (V_i, grad V_i, min boundary distance)
+        self.mission_k = nav_eval_kernel(self.flags["has_obstacles"],
+                                         self.flags["unit_kappa"], self.dim, grad=False)
         self.counts = _i32(2)
         self.counts.fill(0)
         self.adaptive = p.adaptive_radius
@@ -72,19 +73,22 @@ class ObstacleFlockingKernel(FlockingKernel):
         self.nav.from_numpy(as_real(nav_parameters(p.destination, p.obstacle_range, p.kappa,
                                                    self.obstacles.bbox)))
 
-    def _evaluate_mission(self) -> None:
-        """mission[i] = (V_i, grad V_i, min boundary distance) at the current positions."""
-        self.nav_k(self.state["pos"], self.mission, self.nav, *self.obstacles.view())
+    def _evaluate_mission(self) -> ti.Ndarray:
+        """(V_i, min boundary distance) at the current positions, per slot, into the step's
+        spare position buffer (dead until the step's motion writes it), returned."""
+        out = self.state.scratch("pos")
+        self.mission_k(self.state["pos"], out, self.nav, *self.obstacles.view())
+        return out
 
     def _before_motion(self, step: int) -> None:
         """Eq. 4 at its cadence, before the step's motion."""
         if not self.adaptive or step == 0 or step % self.p.radius_every:
             return
         st = self.state
-        self._evaluate_mission()
+        mission = self._evaluate_mission()
         update = radius_kernel(self.flags["rule"], self.flags["inclusive"],
                                self._search(self.grid), self.dim)
-        update(st["pos"], st["vel"], st["rad"], st.scratch("rad"), self.mission, self.prm,
+        update(st["pos"], st["vel"], st["rad"], st.scratch("rad"), mission, self.prm,
                self.counts, *self.grid.view())
         st.swap("rad")
 
@@ -92,39 +96,65 @@ class ObstacleFlockingKernel(FlockingKernel):
         """1/2 sum_i sum_{j != i} V(R_ij), the saturated value of every U_ij (eq. 5):
         R_ij = R_i (own), or min(R_i, R_j), where the k-th smallest radius is the smaller
         one of its pairs with the N - 1 - k larger ones."""
-        rad = wide(self.state["rad"])
-        v = self.a / rad**2 + np.log(rad**2) + self.c
+        n = self.n
+        total = PairwiseSum(n)
         if self.p.radius_rule == "own":
-            return 0.5 * (self.n - 1) * float(v.sum())
-        order = np.argsort(rad, kind="stable")
-        return float((v[order] * (self.n - 1 - np.arange(self.n))).sum())
+            rows = Rows(self.state["rad"])
+            for lo, hi in blocks(n):
+                total.add(self._saturated(rows.wide(lo, hi)))
+            return 0.5 * (n - 1) * total.total()
+        rad = np.sort(wide(self.state["rad"]), kind="stable")  # = rad[argsort(rad)]
+        for lo, hi in blocks(n):
+            total.add(self._saturated(rad[lo:hi]) * (n - 1 - np.arange(lo, hi)))
+        return total.total()
+
+    def _saturated(self, rad: np.ndarray) -> np.ndarray:
+        """V(R) of paper 002's potential, a / R^2 + log R^2 + c, per radius."""
+        return self.a / rad**2 + np.log(rad**2) + self.c
 
     def observe(self, step: int) -> dict[str, float]:
         obs = super().observe(step)
         st = self.state
-        self._evaluate_mission()
-        m = wide(self.mission)
-        mission_sum = float(m[:, 0].sum())
+        n, dim = self.n, self.dim
+        mission = Rows(self._evaluate_mission())
+        pos, rad = Rows(st["pos"]), Rows(st["rad"])
+        dest = np.asarray(self.p.destination)
+        v_sum, dist_sum, rad_sum = PairwiseSum(n), PairwiseSum(n), PairwiseSum(n)
+        inside, ext = 0, {k: (np.inf, -np.inf) for k in ("V", "dist", "delta", "rad")}
+
+        def extremes(key: str, x: np.ndarray) -> None:
+            lo, hi = ext[key]
+            ext[key] = (np.minimum(lo, x.min()), np.maximum(hi, x.max()))
+
+        for lo, hi in blocks(n):
+            m, x, r = mission.wide(lo, hi), pos.wide(lo, hi), rad.wide(lo, hi)
+            v_sum.add(m[:, 0])
+            inside += int(np.count_nonzero(m[:, 0] <= self.p.V_min))
+            extremes("V", m[:, 0])
+            extremes("delta", m[:, 1])
+            if dim == 3:
+                dist = np.linalg.norm(x - dest, axis=1)
+            else:
+                dist = np.hypot(x[:, 0] - dest[0], x[:, 1] - dest[1])
+            dist_sum.add(dist)
+            extremes("dist", dist)
+            rad_sum.add(r)
+            extremes("rad", r)
+        mission_sum = v_sum.total()
         obs["Q_reduced"] += mission_sum  # eq. 5: + sum_i V_i
         obs["Q"] += mission_sum
-        pos, vel, rad = wide(st["pos"]), wide(st["vel"]), wide(st["rad"])
-        if self.dim == 3:
-            dist = np.linalg.norm(pos - np.asarray(self.p.destination), axis=1)
-        else:
-            dist = np.hypot(pos[:, 0] - self.p.destination[0],
-                            pos[:, 1] - self.p.destination[1])
         cap = self.obstacles.cell
         obs.update({
-            "destination_distance_mean": float(dist.mean()),
-            "destination_distance_max": float(dist.max()),
-            "inside_vmin_fraction": float(np.mean(m[:, 0] <= self.p.V_min)),
-            "mission_potential_max": float(m[:, 0].max()),
+            "destination_distance_mean": dist_sum.total() / n,
+            "destination_distance_max": float(ext["dist"][1]),
+            "inside_vmin_fraction": inside / n,
+            "mission_potential_max": float(ext["V"][1]),
             # Exact below the obstacle grid's cell; capped there (no obstacle closer).
-            "obstacle_distance_min": float(min(m[:, self.dim + 1].min(), cap)),
-            "radius_min": float(rad.min()),
-            "radius_mean": float(rad.mean()),
-            "radius_max": float(rad.max()),
-            **fo.component_disagreement(vel, self.component_labels()),
+            "obstacle_distance_min": float(min(ext["delta"][0], cap)),
+            "radius_min": float(ext["rad"][0]),
+            "radius_mean": rad_sum.total() / n,
+            "radius_max": float(ext["rad"][1]),
+            **fo.component_disagreement(st["vel"], self.component_labels()),
         })
         return obs
 

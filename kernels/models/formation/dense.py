@@ -34,10 +34,12 @@ def stencil_reach(densest: int) -> int:
 
 
 @ti.kernel
-def max_count(count: nd) -> ti.i32:
+def max_count(start: nd) -> ti.i32:
+    """The most agents in one bucket, from the buckets' starts (the exclusive scan of their
+    counts, one entry longer): the grid may reuse its counts once scanned."""
     m = 0
-    for b in range(count.shape[0]):
-        ti.atomic_max(m, count[b])
+    for b in range(start.shape[0] - 1):
+        ti.atomic_max(m, start[b + 1] - start[b])
     return m
 
 

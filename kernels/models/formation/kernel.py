@@ -28,14 +28,16 @@ import taichi as ti
 from flocklab.schemas import Scenario
 from flocklab.schemas.formation import FormationParams, SaturatingF
 
+from ... import runtime
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
-from ...space.graph import MetricGraph
+from ...space.graph import MetricGraph, count_roots, flatten
 from ...space.grid import Grid, make_visitor, permute, permute_rows, row, within
 from ...space.initial import initial_state
 from ...space.integrate import count_nonfinite, gather_rows, rk4_begin, rk4_finish, rk4_stage
 from ...space.state import SortedState
+from ...space.stream import PairwiseSum, Rows, RowSum, blocks
 from .dense import bucket_aggregates, coarse_euler, max_count, stencil_reach
 from .forces import (
     F_KINDS,
@@ -54,7 +56,7 @@ from .forces import (
 from .fused import FormationBatch
 from .norms import norms
 from .path import make_path
-from .props import at_leader, d2_isolated, d3_holds, d3_holds_3d, roots
+from .props import Isolated, surrounds_2d, surrounds_3d_all
 from .schedule import OffsetSchedule
 
 nd = ti.types.ndarray()
@@ -195,12 +197,15 @@ class FormationKernel(ModelKernel):
         self.schedule = (OffsetSchedule(p.formation, p.schedule, n, d, dim) if self.f1
                          else None)
         self.state = SortedState({"pos": init.positions})
+        del init  # the host positions, before the other device arrays
         self.grid = Grid(n, d, None, policy, dim)
         self.graph: MetricGraph | None = None
         self.prm_host = force_params(p, d, dt, dim)
         self.prm = ti.ndarray(float, shape=self.prm_host.shape)
-        rows = n if self.f1 else 1
-        self.b_dev = [ti.ndarray(float, shape=(rows, dim)) for _ in range(2)]
+        # The offsets of the (at most two) stored formations in use: the second only when
+        # the schedule stores more than one (F1 with a change to a new formation).
+        held = 0 if not self.f1 else min(len(self.schedule.stored), 2)
+        self.b_dev = [ti.ndarray(float, shape=(n if k < held else 1, dim)) for k in range(2)]
         self.b_held: list[int | None] = [None, None]
         self.bad = ti.ndarray(ti.i32, shape=2)
         self.fkind = F_KINDS[p.attraction.kind]
@@ -209,11 +214,10 @@ class FormationKernel(ModelKernel):
         if p.integrator == "rk4":
             self.grid2 = Grid(n, d, None, policy, dim)
             self.tmp_pos = ti.ndarray(float, shape=(n, dim))
-            self.tmp_vel = ti.ndarray(float, shape=(n, dim))
             self.tmp_ids = ti.ndarray(ti.i32, shape=n)
             # RK4's stage state, rates and weighted sum of the rates (kernels/space/integrate.py)
             self.rk4 = {k: ti.ndarray(float, shape=(n, dim)) for k in ("ys", "k", "yk")}
-        self.obs_out: tuple | None = None
+        self.aux: ti.Ndarray | None = None  # per slot: degree, pair energy, nearest d^2
         # The dense regime's coarse step is 2D: 3D Euler steps are always exact.
         self.cap = p.max_exact_candidates if p.integrator == "euler" and dim == 2 else None
         self.fine: tuple[int, Grid] | None = None  # the dense regime's grid, by reach m
@@ -234,6 +238,9 @@ class FormationKernel(ModelKernel):
                 free = next(j for j in range(2) if self.b_held[j] not in used)
                 self.b_dev[free].from_numpy(as_real(self.schedule.stored[k]))
                 self.b_held[free] = k
+                if runtime.real() is np.float64 and len(self.schedule.stored) <= 2:
+                    # Held for the whole run and exact on the device: no host copy.
+                    self.schedule.release(k, Rows(self.b_dev[free]).take)
         dim = self.dim
         slots, lead = lead_slots(dim)
         for s, (t, w) in enumerate(zip(times, weights, strict=True)):
@@ -270,7 +277,7 @@ class FormationKernel(ModelKernel):
         self.state.sort(self.grid, step)
         if self.cap is None:
             return 1
-        densest = max_count(self.grid.count)
+        densest = max_count(self.grid.start)
         if 9 * densest <= self.cap:
             return 1
         m = stencil_reach(densest)
@@ -331,96 +338,166 @@ class FormationKernel(ModelKernel):
         g2.build(y, step)
         permute_rows(y, self.tmp_pos, g2.perm)
         permute(self.state.ids, self.tmp_ids, g2.perm)
-        rates(self.tmp_pos, self.tmp_ids, *self.b_dev, self.tmp_vel, self.prm, slot, self.bad,
+        # The rates in g2's order go to the state's spare buffer, which only the step's
+        # last write (rk4_finish) needs.
+        tmp_vel = self.state.scratch("pos")
+        rates(self.tmp_pos, self.tmp_ids, *self.b_dev, tmp_vel, self.prm, slot, self.bad,
               *g2.view())
-        gather_rows(self.tmp_vel, out, g2.perm)
+        gather_rows(tmp_vel, out, g2.perm)
 
     # --- observation ----------------------------------------------------------------------
 
-    def _observe_arrays(self, step: int) -> dict[str, np.ndarray]:
-        """Positions, rates and neighbour data in storage order at time step * dt."""
+    def _observe_arrays(self, step: int) -> tuple[ti.Ndarray, ti.Ndarray]:
+        """(rates, aux) in storage order at time step * dt: the rates in the state's spare
+        buffer (dead until the step writes it), aux = (degree, pair energy sum, nearest
+        squared distance) per slot."""
         self.state.sort(self.grid, step)
         st = self.state
         blend = self._load_times([step * self.dt])
         _, _, observe = self._kernels(blend)
-        if self.obs_out is None:
-            self.obs_out = (ti.ndarray(float, shape=(self.n, self.dim)),
-                            ti.ndarray(float, shape=(self.n, 3)))
-        vel, aux = self.obs_out
-        observe(st["pos"], st.ids, *self.b_dev, vel, aux, self.prm, *self.grid.view())
-        return {"pos": wide(st["pos"]), "vel": wide(vel), "aux": wide(aux),
-                "ids": st.ids_numpy()}
+        if self.aux is None:
+            self.aux = ti.ndarray(float, shape=(self.n, 3))
+        vel = st.scratch("pos")
+        observe(st["pos"], st.ids, *self.b_dev, vel, self.aux, self.prm, *self.grid.view())
+        return vel, self.aux
 
     def observe(self, step: int) -> dict[str, float]:
+        """The observables from the device arrays read in blocks (kernels/space/stream.py:
+        numpy's bits on whole arrays)."""
         t = step * self.dt
-        arr = self._observe_arrays(step)
-        pos, vel, aux, ids = arr["pos"], arr["vel"], arr["aux"], arr["ids"]
+        vel, aux = self._observe_arrays(step)
         p, q = self.path.position(t), self.path.velocity(t)
         qn = float(norms(q))
-        speed = norms(vel)
-        c = pos.mean(axis=0)
-        obs = {
-            "leader_x": float(p[0]), "leader_y": float(p[1]), "leader_speed": qn,
-            "centroid_x": float(c[0]), "centroid_y": float(c[1]),
-            "centroid_distance": float(norms(c - p)),
-            "speed_min": float(speed.min()), "speed_mean": float(speed.mean()),
-            "speed_max": float(speed.max()),
-            "speed_error_max": float(np.abs(speed - qn).max()),
-            "velocity_mismatch_max": float(norms(vel - q).max()),
-            "min_distance": self._min_distance(pos, aux[:, 2]),
-            "degree_mean": float(aux[:, 0].mean()),
-        }
-        if self.dim == 3:
-            obs.update({"leader_z": float(p[2]), "centroid_z": float(c[2])})
-        pair_part = 0.5 * float(aux[:, 1].sum())
+        n = self.n
+        st = self.state
+        rows = {"pos": Rows(st["pos"]), "vel": Rows(vel), "aux": Rows(aux)}
         if self.f1:
+            rows["ids"] = Rows(st.ids)
             lag = lag_length(self.p, qn)
             a = np.zeros(self.dim) if qn == 0.0 else (lag / qn) * q
             if self.p.lag_sign == "eq8":
                 a = -a
-            e = norms(pos - (p + self.schedule.at(t)[ids] + a))
+        centroid = RowSum()
+        sums = {k: PairwiseSum(n) for k in ("speed", "degree", "pair", "energy", "error")}
+        low = {"speed": np.inf, "near": np.inf}
+        high = {"speed": -np.inf, "speed_error": -np.inf, "mismatch": -np.inf,
+                "error": -np.inf}
+        isolated = Isolated(self.p.leader_tolerance or self.d / 100.0)
+
+        def extremes(key: str, x: np.ndarray, least: bool = False) -> None:
+            if least:
+                low[key] = np.minimum(low[key], x.min())
+            if key in high:
+                high[key] = np.maximum(high[key], x.max())
+
+        for lo, hi in blocks(n):
+            x, v = rows["pos"].wide(lo, hi), rows["vel"].wide(lo, hi)
+            ax = rows["aux"].wide(lo, hi)
+            centroid.add(x)
+            speed = norms(v)
+            sums["speed"].add(speed)
+            extremes("speed", speed, least=True)
+            extremes("speed_error", np.abs(speed - qn))
+            extremes("mismatch", norms(v - q))
+            extremes("near", ax[:, 2], least=True)
+            sums["degree"].add(ax[:, 0])
+            sums["pair"].add(ax[:, 1])
+            if self.f1:  # e_i = |r_i - (r_id + a)|, r_id = p + b_i(t)
+                e = norms(x - (p + self.schedule.at(t, rows["ids"](lo, hi)) + a))
+                sums["error"].add(e)
+                extremes("error", e)
+                sums["energy"].add(attraction_energy(self.p, e))
+            else:
+                dist = norms(x - p)
+                sums["energy"].add(attraction_energy(self.p, dist))
+                isolated.add(dist, ax[:, 0])
+        c = centroid.total() / n
+        obs = {
+            "leader_x": float(p[0]), "leader_y": float(p[1]), "leader_speed": qn,
+            "centroid_x": float(c[0]), "centroid_y": float(c[1]),
+            "centroid_distance": float(norms(c - p)),
+            "speed_min": float(low["speed"]), "speed_mean": sums["speed"].total() / n,
+            "speed_max": float(high["speed"]),
+            "speed_error_max": float(high["speed_error"]),
+            "velocity_mismatch_max": float(high["mismatch"]),
+            "min_distance": self._min_distance(float(low["near"])),
+            "degree_mean": sums["degree"].total() / n,
+        }
+        if self.dim == 3:
+            obs.update({"leader_z": float(p[2]), "centroid_z": float(c[2])})
+        pair_part = 0.5 * sums["pair"].total()
+        if self.f1:
             obs.update({
-                "formation_error": float(e.mean()), "formation_error_max": float(e.max()),
+                "formation_error": sums["error"].total() / n,
+                "formation_error_max": float(high["error"]),
                 "lag": float(lag),
-                "V1": float(attraction_energy(self.p, e).sum()) + pair_part,
+                "V1": sums["energy"].total() + pair_part,
             })
         else:
-            rel = pos - p
-            obs["V2"] = float(attraction_energy(self.p, norms(rel)).sum()) + pair_part
-            obs.update(self._d_properties(rel, aux[:, 0], obs["min_distance"]))
+            obs["V2"] = sums["energy"].total() + pair_part
+            obs.update(self._d_properties(p, isolated, obs["min_distance"]))
         return obs
 
-    def _min_distance(self, pos: np.ndarray, nearest2: np.ndarray) -> float:
+    def _min_distance(self, nearest2: float) -> float:
         """Exact when some pair is closer than a grid cell; else exact by brute force at
         N <= 4096, and the cell width (a lower bound) beyond."""
-        m = float(nearest2.min())
-        if m < _NO_PAIR:
-            return float(np.sqrt(m))
+        if nearest2 < _NO_PAIR:
+            return float(np.sqrt(nearest2))
         if 2 <= self.n <= 4096:
+            pos = wide(self.state["pos"])
             dist = norms(pos[:, None, :] - pos[None, :, :])
             np.fill_diagonal(dist, np.inf)
             return float(dist.min())
         return float(self.grid.gf[0])
 
-    def _d_properties(self, rel: np.ndarray, degree: np.ndarray, min_dist: float
+    def _d_properties(self, p: np.ndarray, isolated: Isolated, min_dist: float
                       ) -> dict[str, float]:
         """D1-D3 of an F2 formation around r_0 = p(t)."""
-        tol = self.p.leader_tolerance or self.d / 100.0
+        tol = isolated.tol
         collide = self.p.collision_distance or self.d / 100.0
         if self.graph is None:
             self.graph = MetricGraph(self.n, self.d, self.inclusive, False, self.dim)
         st = self.state
         self.graph.union_edges(self.grid, st["pos"], st.ids)
-        labels = roots(self.graph.parent.to_numpy())
-        isolated = d2_isolated(degree, at_leader(rel, tol))
-        d3 = d3_holds(rel, labels, tol) if self.dim == 2 else d3_holds_3d(rel, labels, tol)
+        flatten(self.graph.parent)  # each slot's component label: its root
+        n_isolated = isolated.count()
         return {
             "D1": float(min_dist >= collide),
-            "D2": float(isolated == 0),
-            "D3": float(d3),
-            "isolated": float(isolated),
-            "components": float(len(np.unique(labels))),
+            "D2": float(n_isolated == 0),
+            "D3": float(self._d3(p, tol)),
+            "isolated": float(n_isolated),
+            "components": float(count_roots(self.graph.parent)),
         }
+
+    def _d3(self, p: np.ndarray, tol: float) -> bool:
+        """D3 from the agents off r^ (|r_i - r^| > tol), read in blocks: False at once when
+        a component has a single one (no line or plane through r^ has agents of it on both
+        sides), else props.surrounds_2d / surrounds_3d_all on their labels and directions."""
+        n = self.n
+        pos, parent = Rows(self.state["pos"]), Rows(self.graph.parent)
+        far_count = np.zeros(n, dtype=np.int32)
+        for lo, hi in blocks(n):
+            far = norms(pos.wide(lo, hi) - p) > tol
+            np.add.at(far_count, parent(lo, hi)[far], 1)
+        lone = bool(np.any(far_count == 1))
+        del far_count
+        if lone:
+            return False
+        labs, dirs = [], []
+        for lo, hi in blocks(n):
+            rel = pos.wide(lo, hi) - p
+            dist = norms(rel)
+            far = dist > tol
+            labs.append(parent(lo, hi)[far])
+            if self.dim == 2:
+                dirs.append(np.arctan2(rel[far, 1], rel[far, 0]))
+            else:
+                dirs.append(rel[far] / dist[far, None])
+        lab = np.concatenate(labs)
+        del labs
+        d = np.concatenate(dirs)
+        del dirs
+        return surrounds_2d(lab, d) if self.dim == 2 else surrounds_3d_all(lab, d)
 
     def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
         self.state.sort(self.grid, self.now)
@@ -429,7 +506,7 @@ class FormationKernel(ModelKernel):
         if "position" in arrays:
             out["position"] = self.state.in_id_order("pos", ids)
         if "velocity" in arrays:
-            vel = self._observe_arrays(self.now)["vel"]
+            vel = wide(self._observe_arrays(self.now)[0])
             out["velocity"] = np.empty_like(vel)
             out["velocity"][ids] = vel
         return out

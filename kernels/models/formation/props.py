@@ -8,7 +8,7 @@ D3  every connected component of the neighbour graph is a "connected formation a
     hull of the component: the directions from r^ to its agents leave no angular gap
     larger than pi, and a gap of exactly pi is allowed only when every agent lies on one
     line through r^, on both sides. Agents within the tolerance of r^ count as at r^.
-Components come from the engine's union-find forest (`roots`).
+Components come from the engine's union-find forest, flattened to its roots.
 
 In 3D "line" becomes "plane through r^", and D3 is tested as an LP: by Stiemke's lemma no
 plane through r^ has agents of a component strictly on one side only exactly when some
@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linprog
 
+from ...space.stream import ArgMin
 from .norms import norms
 
 _ANGLE_TOL = 1e-9
@@ -32,44 +33,54 @@ _ANGLE_TOL = 1e-9
 _PLANE_TOL = 1e-7
 
 
-def roots(parent: np.ndarray) -> np.ndarray:
-    """The root of every node of a union-find forest (pointer jumping)."""
-    lab = parent
-    while True:
-        up = lab[lab]
-        if np.array_equal(up, lab):
-            return lab
-        lab = up
+class Isolated:
+    """D2's count, fed in blocks of agents: those without a neighbour, not counting the
+    one at r^ (the agent nearest r^, if within tol). `add(dist, degree)`: the blocks'
+    distances |r_i - r^| and degrees; `count()` once all arrived (D2 holds when 0)."""
 
+    def __init__(self, tol: float):
+        self.tol = tol
+        self.nearest = ArgMin()
+        self.lonely = 0
+        self._seen = 0
+        self._nearest_lonely = False
 
-def at_leader(rel: np.ndarray, tol: float) -> int:
-    """Index of the agent at r^ (nearest, within tol), or -1. `rel` = r_i - r^."""
-    dist = norms(rel)
-    k = int(np.argmin(dist))
-    return k if dist[k] <= tol else -1
+    def add(self, dist: np.ndarray, degree: np.ndarray) -> None:
+        first = self.nearest.index
+        self.nearest.add(dist)
+        if self.nearest.index != first:
+            self._nearest_lonely = bool(degree[self.nearest.index - self._seen] == 0)
+        self.lonely += int(np.count_nonzero(degree == 0))
+        self._seen += len(dist)
 
-
-def d2_isolated(degree: np.ndarray, exempt: int) -> int:
-    """Agents without a neighbour, not counting the one at r^ (D2 holds when 0)."""
-    lonely = np.count_nonzero(degree == 0)
-    return int(lonely - (1 if exempt >= 0 and degree[exempt] == 0 else 0))
+    def count(self) -> int:
+        exempt = self.nearest.index >= 0 and self.nearest.value <= self.tol
+        return self.lonely - (1 if exempt and self._nearest_lonely else 0)
 
 
 def d3_holds(rel: np.ndarray, labels: np.ndarray, tol: float) -> bool:
     """Whether every component (agents sharing a label) surrounds r^ (`rel` = r_i - r^)."""
     far = np.hypot(rel[:, 0], rel[:, 1]) > tol
-    if not far.any():
+    return surrounds_2d(labels[far], np.arctan2(rel[far, 1], rel[far, 0]))
+
+
+def surrounds_2d(lab: np.ndarray, ang: np.ndarray) -> bool:
+    """D3 in 2D from the agents off r^: their components' labels and the angles of their
+    directions from r^. Every component must leave no gap between consecutive directions
+    above pi (exactly pi only with agents on both sides of one line)."""
+    if not len(lab):
         return True
-    lab = labels[far]
-    ang = np.arctan2(rel[far, 1], rel[far, 0])
     order = np.lexsort((ang, lab))
     lab, ang = lab[order], ang[order]
+    del order
     first = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]])
-    last = np.r_[first[1:], len(lab)] - 1
+    del lab
+    last = np.r_[first[1:], len(ang)] - 1
     # gap from each agent to the next one counter-clockwise in its component
-    nxt = np.arange(1, len(lab) + 1)
+    nxt = np.arange(1, len(ang) + 1)
     nxt[last] = first
     gap = ang[nxt] - ang
+    del nxt, ang
     gap[last] += 2.0 * np.pi
     big = np.maximum.reduceat(gap, first)
     half_planes = np.add.reduceat((gap > np.pi - _ANGLE_TOL).astype(np.int64), first)
@@ -102,8 +113,11 @@ def d3_holds_3d(rel: np.ndarray, labels: np.ndarray, tol: float) -> bool:
     """D3 in 3D: every component surrounds r^ (`rel` = r_i - r^, (N, 3))."""
     dist = norms(rel)
     far = dist > tol
-    u = rel[far] / dist[far, None]
-    lab = labels[far]
+    return surrounds_3d_all(labels[far], rel[far] / dist[far, None])
+
+
+def surrounds_3d_all(lab: np.ndarray, u: np.ndarray) -> bool:
+    """D3 in 3D from the agents off r^: their components' labels and unit directions."""
     order = np.argsort(lab, kind="stable")
     u, lab = u[order], lab[order]
     cuts = np.flatnonzero(lab[1:] != lab[:-1]) + 1

@@ -14,6 +14,8 @@ zero, so b(t) keeps mean zero (paper condition 1); a rotation keeps every pair d
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from flocklab.schemas.formation import FormationChange, FormationSpec
@@ -27,7 +29,8 @@ class OffsetSchedule:
     def __init__(self, first: FormationSpec, changes: list[FormationChange], n: int, d: float,
                  dim: int = 2):
         self.changes = changes
-        self.dim = dim
+        self.n, self.dim = n, dim
+        self._rows: dict[int, Callable[[np.ndarray], np.ndarray]] = {}  # released formations
         self._eye = np.eye(dim)
         self.stored = [offsets(first, n, d, dim)]
         # B_c = in_force[c][1] @ stored[in_force[c][0]] (as dim x dim acting on each offset)
@@ -65,11 +68,20 @@ class OffsetSchedule:
         k, m = self.in_force[done]
         return {k: m}
 
-    def at(self, t: float) -> np.ndarray:
-        """b_i(t), (N, dim) in agent-id order."""
-        b = np.zeros_like(self.stored[0])
+    def release(self, k: int, rows: Callable[[np.ndarray], np.ndarray]) -> None:
+        """Drop stored formation k's host offsets: `rows(ids)` gives those of agents `ids`
+        back, bit for bit (from the device's float64 copy)."""
+        self.stored[k] = None
+        self._rows[k] = rows
+
+    def at(self, t: float, ids: np.ndarray | None = None) -> np.ndarray:
+        """b_i(t), (N, dim) in agent-id order; with `ids`, the rows of those agents (the
+        only way to read a released formation)."""
+        b = np.zeros((self.n if ids is None else len(ids), self.dim))
         for k, m in self.weights(t).items():
-            cols = [self.stored[k][:, c] for c in range(self.dim)]
+            src = self._rows[k](ids) if k in self._rows else (
+                self.stored[k] if ids is None else self.stored[k][ids])
+            cols = [src[:, c] for c in range(self.dim)]
             for r in range(self.dim):
                 # the terms summed left to right, as the 2D-only code wrote them out
                 row = m[r, 0] * cols[0]
