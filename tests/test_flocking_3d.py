@@ -181,3 +181,38 @@ def test_obstacle_coordinates_must_match_the_dimension():
         m3_scenario(obstacles=[[1.0, 1.0]])
     (err,) = field_errors(exc.value)
     assert err.loc == "model" and "obstacles[0] has 2 coordinates" in err.msg
+
+
+def two_clusters_3d(n: int, gap: float, seed: int) -> dict:
+    """Two jittered cubic lattices `gap` apart along x: a bounding box of far more cells
+    than agents, where the dense grid gives way to the hashed one."""
+    half = lattice_3d(n // 2, 1.1, seed)
+    other = lattice_3d(n - n // 2, 1.1, seed + 1)
+    pos = half["positions"] + [[x + gap, y, z] for x, y, z in other["positions"]]
+    return {"kind": "explicit", "positions": pos,
+            "velocities": half["velocities"] + other["velocities"]}
+
+
+@pytest.mark.parametrize("hashed,sprawl", [(False, False), (True, False), (False, True)],
+                         ids=["dense", "hash", "sprawl-falls-back-to-hash"])
+def test_3d_grids_match_brute_force(taichi_cpu, hashed, sprawl):
+    """The dense 3D grid (nine contiguous rows of three cells), the hashed grid of a device
+    without it, and a sprawling swarm's fallback: each step equals the brute-force law."""
+    from tests.test_flocking_reference import make_kernel
+
+    sc = scenario(n=216, steps=8, search="grid", R=1.8)
+    if sprawl:
+        spec = sc.model_dump(mode="json")
+        spec["initial"] = two_clusters_3d(216, 1e4, 7)
+        sc = Scenario.model_validate(spec)
+    k = make_kernel(sc, hashed=hashed)
+    f = k.frame(["position", "velocity"])
+    x, v = f["position"], f["velocity"]
+    a, _ = sc.model.potential.coefficients()
+    for step in range(sc.time.steps):
+        k.step(step)
+        x, v = euler(x, v, m2_accel(x, v, a=a, R=1.8, inclusive=sc.inclusive), sc.time.dt)
+        f = k.frame(["position", "velocity"])
+        assert np.abs(f["position"] - x).max() < 1e-10, step
+        assert np.abs(f["velocity"] - v).max() < 1e-10, step
+    assert k.grid.layout == ("hash" if hashed or sprawl else "dense")

@@ -1,16 +1,18 @@
-"""A dense plane grid for compact swarms: row-major cells over the bounding box.
+"""A dense grid for compact swarms in unbounded space: row-major cells over the bounding box.
 
-The engine's plane grid (kernels/space/grid.py) hashes cells into buckets, so the 3x3 cells
-around an agent lie at unrelated places in memory. When the swarm's bounding box holds at
-most `CELLS_PER_AGENT` cells of side R per agent, this grid numbers the cells row by row
-instead: the three cells of a row are one contiguous range of agents, as in the periodic
-box (a step of M2 at N = 10^6: 0.31 s instead of 1.1 s here). A sprawling swarm (or a GPU,
-where the engine's parallel scatter is needed) uses the engine's hashed grid instead.
+The engine's unbounded grid (kernels/space/grid.py) hashes cells into buckets, so the 3x3
+(3x3x3) cells around an agent lie at unrelated places in memory. When the swarm's
+bounding box holds at most `CELLS_PER_AGENT` cells of side R per agent, this grid numbers
+the cells row by row instead (x fastest, then y, then z): the three cells of a row are one
+contiguous range of agents, as in the periodic box (a step of M2 at N = 10^6: 0.31 s
+instead of 1.1 s here). A sprawling swarm (or a GPU, where the engine's parallel scatter
+is needed) uses the engine's hashed grid instead. One source for 2D and 3D (`dim` at
+compile time); the 2D arithmetic is the 2D-only grid's, operation for operation.
 
-Build: bounding box -> cell (cx, cy) = floor((r - r_min) / cell) -> count -> exclusive scan
--> stable serial scatter (perm), so the order and every sum are reproducible.
-Visit: `make_dense_visitor(pair)` has the interface of grid.make_visitor and reads the
-view (start, unused, gf, gi) with gf = (cell, x0, y0), gi = (cells across, cells down).
+Build: bounding box -> cell c_a = floor((r_a - r_min,a) / cell) -> count -> exclusive
+scan -> stable serial scatter (perm), so the order and every sum are reproducible.
+Visit: `make_dense_visitor(pair, dim)` has the interface of grid.make_visitor and reads
+the view (start, unused, gf, gi) with gf = (cell, x0, y0[, z0]), gi = (cells along x, y[, z]).
 """
 
 import math
@@ -21,26 +23,41 @@ import taichi as ti
 from .. import runtime
 from ..result import SimulationDiverged
 from ..runtime import DevicePolicy
-from .grid import Grid, bbox_buffer, bounding_box, max_cells_across, widen
+from .grid import Grid, bbox_buffer, bounding_box, max_cells_across, row, widen
 
 nd = ti.types.ndarray()
 CELLS_PER_AGENT = 4
 
 
 @ti.func
-def _cell(x, y, gf: ti.template()):
+def _cell(xi, gf: ti.template()):
     inv = 1.0 / gf[0]
-    return ti.math.ivec2(int(ti.floor((x - gf[1]) * inv)), int(ti.floor((y - gf[2]) * inv)))
+    c = ti.Vector.zero(ti.i32, xi.n)
+    for a in ti.static(range(xi.n)):
+        c[a] = int(ti.floor((xi[a] - gf[1 + a]) * inv))
+    return c
+
+
+@ti.func
+def _row_start(ry, rz, gi: ti.template()):
+    """The bucket of cell (0, ry, rz): rows of x-cells are contiguous."""
+    return gi[0] * (ry + gi[1] * rz)
 
 
 @ti.kernel
-def _assign(pos: nd, key: nd, count: nd, gf: nd, gi: nd):
-    for b in range(gi[0] * gi[1]):
+def _assign(pos: nd, key: nd, count: nd, gf: nd, gi: nd, dim: ti.template()):
+    cells = gi[0] * gi[1]
+    if ti.static(dim == 3):
+        cells *= gi[2]
+    for b in range(cells):
         count[b] = 0
     for i in range(pos.shape[0]):
-        c = _cell(pos[i, 0], pos[i, 1], gf)
-        key[i] = c[0] + gi[0] * c[1]
-        ti.atomic_add(count[key[i]], 1)
+        c = _cell(row(pos, i, dim), gf)
+        k = c[0] + gi[0] * c[1]
+        if ti.static(dim == 3):
+            k = c[0] + _row_start(c[1], c[2], gi)
+        key[i] = k
+        ti.atomic_add(count[k], 1)
 
 
 @ti.kernel
@@ -68,8 +85,9 @@ class DenseGrid:
     more (a swarm at the density of its interaction range spans a few cells per 10
     agents: sizing them for the cap, 4 per agent, took 32 B/agent)."""
 
-    def __init__(self, n: int, radius: float):
+    def __init__(self, n: int, radius: float, dim: int = 2):
         self.n = n
+        self.dim = dim
         self.radius = float(radius)
         self.cell = self.radius * widen()
         self.max_cells = CELLS_PER_AGENT * n + 16
@@ -78,30 +96,31 @@ class DenseGrid:
         self.cells = 0  # the cells `count` and `start` have room for
         self.count: ti.Ndarray | None = None
         self.start: ti.Ndarray | None = None
-        self.gf = ti.ndarray(float, shape=3)
-        self.gi = ti.ndarray(ti.i32, shape=2)
-        self._bb_part = bbox_buffer(n)
+        self.gf = ti.ndarray(float, shape=1 + dim)
+        self.gi = ti.ndarray(ti.i32, shape=dim)
+        self._bb_part = bbox_buffer(n, dim)
 
     def build(self, pos: ti.Ndarray, step: int) -> bool:
         """Bucket the agents at `pos`; False (nothing built) if the box needs more than
         CELLS_PER_AGENT cells per agent."""
-        x0, y0, x1, y1 = bounding_box(pos, self._bb_part)
-        extent = max(x1 - x0, y1 - y0)
+        d = self.dim
+        bb = bounding_box(pos, self._bb_part)
+        extent = max(bb[d + a] - bb[a] for a in range(d))
         if not math.isfinite(extent):
             raise SimulationDiverged(step, "position", "a position became non-finite")
-        if extent / self.cell > max_cells_across():
+        if extent / self.cell > max_cells_across(d):
             return False  # the engine's grid reports the runaway swarm
-        # One spare column and row: floor() in the kernel may round up where int() here
-        # rounds down, and no cell index may reach past the grid.
-        nx = int((x1 - x0) / self.cell) + 2
-        ny = int((y1 - y0) / self.cell) + 2
-        if nx * ny > self.max_cells:
+        # One spare cell along each axis: floor() in the kernel may round up where int()
+        # here rounds down, and no cell index may reach past the grid.
+        shape = [int((bb[d + a] - bb[a]) / self.cell) + 2 for a in range(d)]
+        cells = math.prod(shape)
+        if cells > self.max_cells:
             return False
-        self._reserve(nx * ny)
-        self.gf.from_numpy(runtime.as_real([self.cell, x0, y0]))
-        self.gi.from_numpy(np.array([nx, ny], dtype=np.int32))
-        _assign(pos, self.key, self.count, self.gf, self.gi)
-        _scan_scatter(self.key, self.count, self.start, self.perm, nx * ny)
+        self._reserve(cells)
+        self.gf.from_numpy(runtime.as_real([self.cell, *bb[:d]]))
+        self.gi.from_numpy(np.array(shape, dtype=np.int32))
+        _assign(pos, self.key, self.count, self.gf, self.gi, d)
+        _scan_scatter(self.key, self.count, self.start, self.perm, cells)
         return True
 
     def _reserve(self, cells: int) -> None:
@@ -117,22 +136,30 @@ class DenseGrid:
         return (self.start, self.key, self.gf, self.gi)
 
 
-def make_dense_visitor(pair):
-    """grid.make_visitor's interface over a DenseGrid: three contiguous rows of three cells."""
+def make_dense_visitor(pair, dim: int = 2):
+    """grid.make_visitor's interface over a DenseGrid: three contiguous rows of three cells
+    (3D: nine rows, z layers outermost)."""
+    layers = range(-1, 2) if dim == 3 else range(1)
 
     @ti.func
     def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
               periodic: ti.template()):
         start, gf, gi = ti.static(G[0], G[2], G[3])
-        c = _cell(xi[0], xi[1], gf)
+        c = _cell(xi, gf)
         lo = ti.max(c[0] - 1, 0)
         hi = ti.min(c[0] + 1, gi[0] - 1)
-        for b in range(3):
-            ry = c[1] + b - 1
-            if (ry >= 0) & (ry < gi[1]) & (lo <= hi):
-                row = gi[0] * ry
-                for k in range(start[row + lo], start[row + hi + 1]):
-                    acc = pair(i, k, ti.math.vec2(pos[k, 0] - xi[0], pos[k, 1] - xi[1]), acc, S)
+        for e in ti.static(layers):
+            rz = 0
+            inside = lo <= hi
+            if ti.static(dim == 3):
+                rz = c[2] + e
+                inside = inside & (rz >= 0) & (rz < gi[2])
+            for b in range(3):
+                ry = c[1] + b - 1
+                if inside & (ry >= 0) & (ry < gi[1]):
+                    r0 = _row_start(ry, rz, gi)
+                    for k in range(start[r0 + lo], start[r0 + hi + 1]):
+                        acc = pair(i, k, row(pos, k, dim) - xi, acc, S)
         return acc
 
     return visit
@@ -143,9 +170,9 @@ class PlaneGrid:
     the policy allows one: the CPU), else the engine's hashed grid. `layout` names the one
     built last."""
 
-    def __init__(self, n: int, radius: float, policy: DevicePolicy):
-        self.n, self.radius, self.policy = n, radius, policy
-        self.dense = DenseGrid(n, radius) if policy.dense_grid else None
+    def __init__(self, n: int, radius: float, policy: DevicePolicy, dim: int = 2):
+        self.n, self.radius, self.policy, self.dim = n, radius, policy, dim
+        self.dense = DenseGrid(n, radius, dim) if policy.dense_grid else None
         self.hashed: Grid | None = None  # allocated when first needed
         self.layout = "hash"
 
@@ -160,7 +187,7 @@ class PlaneGrid:
         if self.layout == "dense":
             return self.dense
         if self.hashed is None:
-            self.hashed = Grid(self.n, self.radius, None, self.policy)
+            self.hashed = Grid(self.n, self.radius, None, self.policy, self.dim)
         return self.hashed
 
     @property

@@ -82,16 +82,13 @@ def make_all_pairs_visitor(pair):
     return visit
 
 
-VISITORS = {"all_pairs": make_all_pairs_visitor, "hash": make_visitor,
-            "dense": make_dense_visitor}
-
-
 def visitor(pair, search: str, dim: int = 2):
-    """The neighbour loop for a search: all pairs, the engine's hashed grid, a DenseGrid
-    (2D only)."""
+    """The neighbour loop for a search: all pairs, the engine's hashed grid or a DenseGrid."""
     if search == "hash":
         return make_visitor(pair, dim=dim)
-    return VISITORS[search](pair)
+    if search == "dense":
+        return make_dense_visitor(pair, dim)
+    return make_all_pairs_visitor(pair)
 
 
 @cache

@@ -11,8 +11,8 @@ RK4 (kernels/space/integrate.py) with the neighbour sets re-evaluated at every s
 2-4 on a grid built at the stage positions).
 Observables at observation steps only: velocity statistics, W (eq. 5) or Q (eq. 10),
 valencies, components, lambda_2, and the closest pair.
-3D (space.dimension = 3, M2 only): the same kernels with dim = 3, the engine's hashed grid
-(the dense grid is 2D), and mean_velocity_z beside mean_velocity_x and _y.
+3D (space.dimension = 3): the same kernels and grids with dim = 3, and mean_velocity_z
+beside mean_velocity_x and _y.
 
 `FlockingKernel` is also the base of M3 (obstacles.py), which adds per-agent radii, the
 navigation function, damping and the adaptive radius through the hooks marked below.
@@ -29,7 +29,7 @@ from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
 from ...space.graph import count_roots, flatten, reset_parent
-from ...space.grid import Grid, permute, permute_rows
+from ...space.grid import permute, permute_rows
 from ...space.initial import InitialState, initial_state, unit_rows
 from ...space.integrate import (
     count_nonfinite_pairs,
@@ -169,22 +169,20 @@ class FlockingKernel(ModelKernel):
         self.parent = _i32(n)  # the metric graph's union-find forest, at observations
         self.stage = None
 
-    def _new_grid(self, n: int, r: float) -> PlaneGrid | Grid:
-        """The plane's grid (dense or hashed), or in 3D the engine's hashed grid."""
-        if self.dim == 3:
-            return Grid(n, r, None, self.policy, dim=3)
-        return PlaneGrid(n, r, self.policy)
+    def _new_grid(self, n: int, r: float) -> PlaneGrid:
+        """The unbounded space's grid: dense while the swarm is compact, else hashed."""
+        return PlaneGrid(n, r, self.policy, self.dim)
 
     # --- stepping -----------------------------------------------------------------------
 
     def _rad(self) -> ti.Ndarray:
         return self.state["rad"] if self.per_agent_radius else self._no_rad
 
-    def _search(self, grid: PlaneGrid | Grid) -> str:
+    def _search(self, grid: PlaneGrid) -> str:
         """The visitor for positions bucketed in `grid` (all pairs: no grid)."""
         return "all_pairs" if self.all_pairs else getattr(grid, "layout", "hash")
 
-    def _kernels(self, grid: PlaneGrid | Grid):
+    def _kernels(self, grid: PlaneGrid):
         """(euler, accel) for the grid's current layout (compiled once per layout)."""
         return grid_kernels(**self.flags, search=self._search(grid), dim=self.dim)
 
