@@ -18,6 +18,7 @@ import numpy as np
 
 from flocklab.schemas import Scenario
 
+from .checks import run_checks
 from .live import OBSERVATIONS_INTERVAL, ObservationFeed, ObservationsFn
 from .result import FrameSink, RunResult
 
@@ -171,7 +172,7 @@ def run_batch(
             status=state, backend=backend, steps=done, wall_seconds=wall,
             n_agents=sc.n_agents, observables=obs, final=final, convergence=convergence,
             extra={"setup_seconds": setup, "engine_path": "fused",
-                   **batch.extra(b, status)},
+                   **batch.extra(b, status), **run_checks(sc, obs)},
             error=error,
         ))
     if on_progress is not None and len(scenarios) == 1:

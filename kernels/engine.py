@@ -15,6 +15,7 @@ import numpy as np
 from flocklab.schemas import Scenario
 
 from . import batch, runtime
+from .checks import run_checks
 from .live import OBSERVATIONS_INTERVAL, ObservationFeed, ObservationsFn
 from .model import ModelKernel, kernel_for
 from .result import FrameSink, RunResult, SimulationDiverged
@@ -129,7 +130,8 @@ def run(
         observables=obs,
         final=final,
         convergence=convergence,
-        extra={"setup_seconds": setup_seconds, "engine_path": "per_step", **model.extra()},
+        extra={"setup_seconds": setup_seconds, "engine_path": "per_step", **model.extra(),
+               **run_checks(scenario, obs)},
         error=error,
     )
 

@@ -49,6 +49,12 @@ class ModelParams(Strict):
     def check_context(self, ctx: ModelContext) -> None:
         """Cross-block checks (raise ValueError with a user-facing message)."""
 
+    def non_increasing(self) -> dict[str, str]:
+        """Observables the paper proves never increase along this model's trajectories
+        (name -> where it says so). The engine reports whether a run kept each one: a
+        rise means the time step does not resolve the dynamics."""
+        return {}
+
 
 MODELS: dict[str, type[ModelParams]] = {}
 

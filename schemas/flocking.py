@@ -284,6 +284,11 @@ class FlockingParams(DoubleIntegratorParams):
         default=None, description="The fixed graph (topology 'fixed' only)."
     )
 
+    def non_increasing(self) -> dict[str, str]:
+        if self.topology == "fixed":
+            return {"W": "paper 000, eq. 5-6: the energy W of a fixed graph never increases"}
+        return {"Q": "paper 000, eq. 10-11: Q never increases under switching"}
+
     def check_context(self, ctx: ModelContext) -> None:
         self._check_plane(ctx, "000")
         n = ctx.n_agents

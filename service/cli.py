@@ -149,6 +149,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.backend:
         scenario = scenario.model_copy(update={"backend": args.backend})
     from flocklab.kernels import BackendUnavailable
+    from flocklab.kernels.checks import warnings as check_warnings
 
     from .execute import execute_to_dir
 
@@ -168,6 +169,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     brief = {k: summary[k] for k in ("status", "backend", "steps", "wall_seconds",
                                      "agent_steps_per_second")}
     print(json.dumps({"out": str(args.out), **brief}))
+    for line in check_warnings(summary.get("checks", {})):
+        print(f"flocklab: warning: {line}", file=sys.stderr)
     if summary["status"] == "diverged":
         print(f"flocklab: run diverged: {summary['error']['message']}", file=sys.stderr)
         return EXIT_RUN_FAILED
