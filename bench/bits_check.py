@@ -59,7 +59,7 @@ def scenarios(max_steps: int, large_n: int, large_steps: int
     count cut to `max_steps` (`large_steps` above `large_n` agents), and the final frame of
     every per-agent array recorded."""
     from flocklab.schemas import Scenario
-    from flocklab.schemas.presets import PRESETS, get_preset
+    from flocklab.schemas import PRESETS, get_preset
 
     docs: list[tuple[str, dict[str, Any]]] = []
     for path in sorted((ROOT / "examples").glob("*.json")):
