@@ -58,8 +58,7 @@ def scenarios(max_steps: int, large_n: int, large_steps: int
     """(case name, scenario document) for every example scenario and preset, with the step
     count cut to `max_steps` (`large_steps` above `large_n` agents), and the final frame of
     every per-agent array recorded."""
-    from flocklab.schemas import Scenario
-    from flocklab.schemas import PRESETS, get_preset
+    from flocklab.schemas import PRESETS, Scenario, get_preset
 
     docs: list[tuple[str, dict[str, Any]]] = []
     for path in sorted((ROOT / "examples").glob("*.json")):
