@@ -13,17 +13,20 @@ from dataclasses import asdict, dataclass
 
 from flocklab.schemas import FieldError, Scenario
 
-# Components per agent of each recordable array.
-COMPONENTS = {"position": 2, "velocity": 2, "heading": 1, "degree": 1, "radius": 1}
+# Recordable arrays with one value per coordinate; the others (heading, degree, radius)
+# have one value per agent.
+VECTOR_ARRAYS = frozenset({"position", "velocity"})
 # Bytes per stored value of the frames (`recording.precision`).
 BYTES_PER_VALUE = {"float64": 8, "float32": 4}
-# The periodic image (int32 x 2) that goes with each recorded position in a periodic box
-# (written when it is exact; counted whenever it may be, to stay conservative).
-IMAGE_BYTES = 8
+# The periodic image (one int32 per coordinate) that goes with each recorded position in a
+# periodic box (written when it is exact; counted whenever it may be, to stay conservative).
+IMAGE_BYTES_PER_AXIS = 4
 # Per-agent working set of the engine: state arrays double-buffered, the cell grid's
 # count/offset/sorted-index arrays and per-agent observables scratch. Measured peak RSS
-# growth by `python -m bench.bench` at N = 10^6: 130-140 B (Vicsek) to 370 B (M2/M3).
-ENGINE_BYTES_PER_AGENT = 400
+# growth (`bench/memory.py`, via `python -m bench.bench` and `bench.dimensions`) at
+# N = 10^6, float64: 105-157 B in 2D, 150-180 B in 3D; 250 keeps a margin for the
+# allocator's leftovers.
+ENGINE_BYTES_PER_AGENT = 250
 # Fixed cost of a worker with Taichi loaded and kernels compiled.
 ENGINE_BASE_BYTES = 256 * 2**20
 # An agent may move at most this many interaction radii in one step (and never more than
@@ -55,7 +58,8 @@ def recorded_components(scenario: Scenario) -> int:
     """Values stored per agent and frame: the recorded arrays the model actually has."""
     model = type(scenario.model)
     has = {*model.state_arrays, *model.derived_arrays}
-    return sum(COMPONENTS[a] for a in set(scenario.recording.arrays) if a in has)
+    return sum(scenario.dimension if a in VECTOR_ARRAYS else 1
+               for a in set(scenario.recording.arrays) if a in has)
 
 
 def trajectory_bytes(scenario: Scenario) -> int:
@@ -63,7 +67,7 @@ def trajectory_bytes(scenario: Scenario) -> int:
     `recording.precision`, plus the periodic image beside the positions)."""
     per_agent = recorded_components(scenario) * BYTES_PER_VALUE[scenario.recording.precision]
     if "position" in scenario.recording.arrays and scenario.space.kind == "periodic":
-        per_agent += IMAGE_BYTES
+        per_agent += IMAGE_BYTES_PER_AXIS * scenario.dimension
     return scenario.n_frames * scenario.n_agents * per_agent
 
 
@@ -124,7 +128,8 @@ def check_limits(scenario: Scenario, limits: Limits) -> list[FieldError]:
     if traj > limits.max_trajectory_bytes:
         errors.append(_err("recording.every", f"the trajectory would take {_size(traj)} "
                            f"({scenario.n_frames} frames x {n} agents x "
-                           f"{recorded_components(scenario)} values x {BYTES_PER_VALUE} B), "
+                           f"{recorded_components(scenario)} values x "
+                           f"{BYTES_PER_VALUE[scenario.recording.precision]} B), "
                            f"over the limit of {_size(limits.max_trajectory_bytes)}; record "
                            f"less often or fewer arrays"))
     mem = estimated_memory_bytes(scenario)
