@@ -12,7 +12,7 @@ Mission (M3, paper 002 eq. 3): u_i gains
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import taichi as ti
@@ -43,7 +43,7 @@ class NoMission:
     def parameters(self, prm: np.ndarray) -> None:
         """No slot of its own."""
 
-    def observe(self, flock: Flock, obs: dict[str, Any]) -> None:
+    def observe(self, flock: Flock, obs: dict[str, float]) -> None:
         """Nothing to add."""
 
 
@@ -76,7 +76,7 @@ class Mission:
         self.evaluate_k(state["pos"], out, self.nav, *self.obstacles.view())
         return out
 
-    def observe(self, flock: Flock, obs: dict[str, Any]) -> None:
+    def observe(self, flock: Flock, obs: dict[str, float]) -> None:
         """sum_i V_i into Q (eq. 5); the destination distance, the share inside V_min, the
         largest V_i and the closest obstacle boundary."""
         n, dim = flock.n, flock.dim
