@@ -35,7 +35,7 @@ def nav_at(k, points: np.ndarray) -> np.ndarray:
     pts.from_numpy(np.ascontiguousarray(points))
     out = ti.ndarray(ti.f64, shape=(len(points), 4))
     nav_eval_kernel(k.flags["has_obstacles"], k.flags["unit_kappa"], k.dim)(
-        pts, out, k.nav, *k.obstacles.view())
+        pts, out, k.mission.nav, *k.mission.obstacles.view())
     return out.to_numpy()
 
 
@@ -94,7 +94,7 @@ def test_obstacle_grid_matches_brute_force(taichi_cpu):
     np.testing.assert_allclose(got[:, 0], V, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(got[:, 1:3], G, rtol=1e-10, atol=1e-12)
     delta = np.hypot(*(x[:, None, :] - centers[None]).transpose(2, 0, 1)) - radii
-    near = delta.min(axis=1) < k.obstacles.cell  # exact below the cell; capped above
+    near = delta.min(axis=1) < k.mission.obstacles.cell  # exact below the cell; capped above
     np.testing.assert_allclose(got[near, 3], delta.min(axis=1)[near], rtol=1e-12)
     assert near.sum() > 200
 

@@ -14,8 +14,10 @@ valencies, components, lambda_2, and the closest pair.
 3D (space.dimension = 3): the same kernels and grids with dim = 3, and mean_velocity_z
 beside mean_velocity_x and _y.
 
-`FlockingKernel` is also the base of M3 (obstacles.py), which adds per-agent radii, the
-navigation function, damping and the adaptive radius through the hooks marked below.
+`Flock` is the double-integrator flock assembled from its parts: the topology (a fixed graph
+or metric neighbours), the neighbourhood radius (radius.py) and the mission term
+(mission.py). M2 is a flock with one radius R and no mission; M3 (obstacles.py) the metric
+flock with per-agent radii under eq. 4 and paper 002's navigation function.
 """
 
 from typing import Any
@@ -30,7 +32,7 @@ from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
 from ...space.graph import count_roots, flatten, reset_parent
 from ...space.grid import permute, permute_rows
-from ...space.initial import InitialState, initial_state, unit_rows
+from ...space.initial import initial_state, unit_rows
 from ...space.integrate import (
     count_nonfinite_pairs,
     gather_rows,
@@ -43,8 +45,8 @@ from ...space.state import SortedState
 from ...space.stream import ArgMin, PairwiseSum, Rows, blocks
 from . import observe as fo
 from .forces import (
-    NO_DAMPING,
-    RADIUS_RULES,
+    OWN,
+    UNIFORM,
     P,
     csr_accel,
     csr_euler,
@@ -53,7 +55,8 @@ from .forces import (
     grid_observe_kernel,
 )
 from .fused import FlockingBatch
-from .navigation import NAV, ObstacleGrid
+from .mission import Mission, NoMission
+from .radius import AgentRadii, UniformRadius
 from .topology import build_edges, to_csr
 
 DIVERGED_CAUSE = (
@@ -70,12 +73,15 @@ def _i32(*shape: int) -> ti.Ndarray:
     return ti.ndarray(ti.i32, shape=shape)
 
 
-@register_kernel
-class FlockingKernel(ModelKernel):
-    kind = "flocking"
-    batch = FlockingBatch  # M2 and M3 (inherited) on the fused small-N path
+class Flock(ModelKernel):
+    """Double integrators under u_i = alignment + pair forces [+ mission term], from parts:
+    `fixed` (N_i from the scenario's graph) or metric neighbours within `radii`, and
+    `mission`. The registered models below and in obstacles.py choose the parts."""
 
-    def __init__(self, scenario: Scenario, policy: DevicePolicy):
+    batch = FlockingBatch  # M2 and M3 on the fused small-N path
+
+    def __init__(self, scenario: Scenario, policy: DevicePolicy, fixed: bool,
+                 radii: UniformRadius | AgentRadii, mission: NoMission | Mission):
         super().__init__(scenario, policy)
         p = scenario.model
         self.p = p
@@ -83,10 +89,16 @@ class FlockingKernel(ModelKernel):
         self.dim = scenario.dimension
         self.dt = scenario.time.dt
         self.a, self.c = p.potential.coefficients()
-        self.fixed = self._fixed_topology()
-        self.state = SortedState(self._initial_arrays(initial_state(scenario)))
+        self.fixed = fixed
+        self.radii, self.mission = radii, mission
+        init = initial_state(scenario)
+        self.state = SortedState({"pos": init.positions, "vel": init.velocities,
+                                  **radii.arrays(n)})
+        prm = P.pack(DT=self.dt, A=self.a, C=self.c)
+        radii.parameters(prm)
+        mission.parameters(prm)
         self.prm = _real(P.size)
-        self.prm.from_numpy(as_real(self._parameters()))
+        self.prm.from_numpy(as_real(prm))
         self.bad = _i32(1)
         self.closest: dict[str, Any] = {}
         if self.fixed:
@@ -97,36 +109,6 @@ class FlockingKernel(ModelKernel):
             self.rk4 = {k: _real(n, self.dim) for k in ("xs", "vs", "a", "xk", "vk")}
         else:
             self.rk4 = None
-
-    # --- hooks for M3 -------------------------------------------------------------------
-
-    def _fixed_topology(self) -> bool:
-        return self.p.topology == "fixed"
-
-    def _initial_arrays(self, init: InitialState) -> dict[str, np.ndarray]:
-        return {"pos": init.positions, "vel": init.velocities}
-
-    def _parameters(self) -> np.ndarray:
-        r2 = 0.0 if self.fixed else self.scenario.neighbours.radius ** 2
-        return P.pack(DT=self.dt, A=self.a, C=self.c, R2=r2)
-
-    def _grid_flags(self) -> dict[str, Any]:
-        """Compile-time choices of the grid kernels."""
-        return dict(rule=RADIUS_RULES["uniform"], inclusive=self.scenario.inclusive,
-                    mission=False, damping=NO_DAMPING, has_obstacles=False, unit_kappa=True)
-
-    def _init_navigation(self) -> None:
-        """No mission potential: empty obstacle grid and parameters (never read)."""
-        self.obstacles = ObstacleGrid(np.zeros((0, self.dim)), np.zeros(0), 1.0, self.policy)
-        self.nav = _real(NAV.size)
-
-    def _before_motion(self, step: int) -> None:
-        """Runs after sorting, before the step's motion (M3: the adaptive radius)."""
-
-    def _q_constant(self) -> float:
-        """The constant part of Q, 1/2 sum_i sum_{j != i} V(R) (eq. 10)."""
-        r = self.scenario.neighbours.radius
-        return 0.5 * self.n * (self.n - 1) * self.p.potential.value(r)
 
     # --- set-up -------------------------------------------------------------------------
 
@@ -156,15 +138,16 @@ class FlockingKernel(ModelKernel):
 
     def _init_grid(self, scenario: Scenario) -> None:
         n = self.n
-        self._init_navigation()
-        self.flags = flags = self._grid_flags()
+        # Compile-time choices of the grid kernels.
+        self.flags = dict(rule=self.radii.rule, inclusive=scenario.inclusive,
+                          **self.mission.flags)
         self.all_pairs = self.p.uses_all_pairs(n)
         self.grid_radius = r = scenario.neighbours.radius
         # All pairs: the grid is never built; its arrays only fill the kernels' signature.
         self.grid = self._new_grid(1 if self.all_pairs else n, r)
         rk4_grid = self.p.integrator == "rk4" and not self.all_pairs
         self.stage_grid = self._new_grid(n, r) if rk4_grid else None
-        self.per_agent_radius = flags["rule"] != RADIUS_RULES["uniform"]
+        self.per_agent_radius = self.radii.rule != UNIFORM
         self._no_rad = _real(1)
         self.parent = _i32(n)  # the metric graph's union-find forest, at observations
         self.stage = None
@@ -178,13 +161,13 @@ class FlockingKernel(ModelKernel):
     def _rad(self) -> ti.Ndarray:
         return self.state["rad"] if self.per_agent_radius else self._no_rad
 
-    def _search(self, grid: PlaneGrid) -> str:
+    def search(self, grid: PlaneGrid) -> str:
         """The visitor for positions bucketed in `grid` (all pairs: no grid)."""
         return "all_pairs" if self.all_pairs else getattr(grid, "layout", "hash")
 
     def _kernels(self, grid: PlaneGrid):
         """(euler, accel) for the grid's current layout (compiled once per layout)."""
-        return grid_kernels(**self.flags, search=self._search(grid), dim=self.dim)
+        return grid_kernels(**self.flags, search=self.search(grid), dim=self.dim)
 
     def _sort(self, step: int) -> None:
         """Grid order for this step's positions (fixed graphs and all pairs need none)."""
@@ -194,7 +177,7 @@ class FlockingKernel(ModelKernel):
     def step(self, step: int) -> None:
         self._sort(step)
         if not self.fixed:
-            self._before_motion(step)
+            self.radii.update(self, step)
         st = self.state
         self.bad.fill(0)
         pos_out, vel_out = st.scratch("pos"), st.scratch("vel")
@@ -205,8 +188,8 @@ class FlockingKernel(ModelKernel):
                       self.prm, self.bad, self.dim)
         else:
             euler, _ = self._kernels(self.grid)
-            euler(st["pos"], st["vel"], self._rad(), pos_out, vel_out, self.prm, self.nav,
-                  self.bad, *self.grid.view(), *self.obstacles.view())
+            euler(st["pos"], st["vel"], self._rad(), pos_out, vel_out, self.prm, self.mission.nav,
+                  self.bad, *self.grid.view(), *self.mission.obstacles.view())
         if self.bad.to_numpy()[0]:
             raise SimulationDiverged(step, "position/velocity", DIVERGED_CAUSE)
         st.swap("pos")
@@ -237,8 +220,8 @@ class FlockingKernel(ModelKernel):
             return
         if at_state or self.all_pairs:
             _, accel = self._kernels(self.grid)
-            accel(pos, vel, self._rad(), out, self.prm, self.nav, self.bad,
-                  *self.grid.view(), *self.obstacles.view())
+            accel(pos, vel, self._rad(), out, self.prm, self.mission.nav, self.bad,
+                  *self.grid.view(), *self.mission.obstacles.view())
             return
         if self.stage is None:
             self.stage = _real(self.n, self.dim)  # u in the stage grid's order
@@ -253,8 +236,8 @@ class FlockingKernel(ModelKernel):
         if self.per_agent_radius:
             permute(self.state["rad"], s["rad"], g.perm)
         _, accel = self._kernels(g)
-        accel(s["pos"], s["vel"], s["rad"], s["a"], self.prm, self.nav, self.bad,
-              *g.view(), *self.obstacles.view())
+        accel(s["pos"], s["vel"], s["rad"], s["a"], self.prm, self.mission.nav, self.bad,
+              *g.view(), *self.mission.obstacles.view())
         gather_rows(s["a"], out, g.perm)
 
     # --- observables --------------------------------------------------------------------
@@ -270,6 +253,10 @@ class FlockingKernel(ModelKernel):
             self._closest(step, *fo.closest_pair(wide(st["pos"])), obs)
         else:
             obs.update(self._observe_grid(step, kinetic))
+            self.mission.observe(self, obs)
+            self.radii.observe(self, obs)
+            if self.mission.per_component:
+                obs.update(fo.component_disagreement(st["vel"], self.component_labels()))
         return obs
 
     def _observe_grid(self, step: int, kinetic: float) -> dict[str, float]:
@@ -286,7 +273,7 @@ class FlockingKernel(ModelKernel):
             pot.add(x[:, 1])
             val.add(count_rows(lo, hi)[:, 0].astype(np.int32))
         reduced = 0.5 * pot.total() + kinetic
-        obs = {"Q_reduced": reduced, "Q": reduced + self._q_constant(),
+        obs = {"Q_reduced": reduced, "Q": reduced + self.radii.q_constant(self),
                "components": float(n_comp)}
         obs.update(val.stats(self._by_id(counts) if val.per_agent else None))
         # The 3x3 (3x3x3) cells hold every pair closer than the grid radius: exact below it.
@@ -302,7 +289,7 @@ class FlockingKernel(ModelKernel):
         lam = fo.NOT_COMPUTED
         if self.n <= self.p.lambda2_max_agents:
             radii = wide(st["rad"]) if self.per_agent_radius else self.grid_radius
-            rule = "own" if self.flags["rule"] == RADIUS_RULES["own"] else "min"
+            rule = "own" if self.flags["rule"] == OWN else "min"
             u, v = fo.proximity_edges(wide(st["pos"]), radii, rule, self.flags["inclusive"])
             lam = fo.algebraic_connectivity(fo.graph_matrix(self.n, u, v), n_comp,
                                             self.p.lambda2_max_agents)
@@ -316,7 +303,7 @@ class FlockingKernel(ModelKernel):
         st = self.state
         reset_parent(self.parent)
         observe = grid_observe_kernel(self.flags["rule"], self.flags["inclusive"],
-                                      self._search(self.grid), self.dim)
+                                      self.search(self.grid), self.dim)
         near, counts = st.scratch("pos"), st.scratch("vel")
         observe(st["pos"], self._rad(), self.prm, self.parent, near, counts,
                 *self.grid.view())
@@ -368,10 +355,26 @@ class FlockingKernel(ModelKernel):
         return out
 
     def convergence_keys(self) -> list[str]:
+        if self.mission.per_component:
+            return ["velocity_disagreement_components"]
         return ["velocity_disagreement"]
 
     def extra(self) -> dict[str, Any]:
         out: dict[str, Any] = {"closest_approach": self.closest}
         if self.fixed:
             out["graph"] = self.graph_info
-        return out
+        return {**out, **self.radii.extra()}
+
+
+@register_kernel
+class FlockingKernel(Flock):
+    """M2: one radius R for every pair (switching) or the scenario's graph (fixed), and no
+    mission term."""
+
+    kind = "flocking"
+
+    def __init__(self, scenario: Scenario, policy: DevicePolicy):
+        fixed = scenario.model.topology == "fixed"
+        radius = None if fixed else scenario.neighbours.radius
+        super().__init__(scenario, policy, fixed, UniformRadius(radius),
+                         NoMission(scenario.dimension, policy))
