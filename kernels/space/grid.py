@@ -75,13 +75,33 @@ def _next_pow2(x: int) -> int:
     return 1 << max(4, (x - 1).bit_length())
 
 
+def vector_rows(a) -> bool:
+    """Whether a kernel's array argument holds vectors ((N,) of dim-vectors, one load per
+    row) rather than scalars ((N, dim), one load per component). Compile-time."""
+    return len(a.element_shape()) == 1
+
+
 @ti.func
 def row(a: ti.template(), k, dim: ti.template()):
-    """Row k of an (N, dim) array as a dim-vector."""
+    """Row k of an (N, dim) array, or element k of an (N,) array of dim-vectors, as a
+    dim-vector."""
     v = ti.Vector.zero(float, dim)
-    for c in ti.static(range(dim)):
-        v[c] = a[k, c]
+    if ti.static(vector_rows(a)):
+        v = a[k]
+    else:
+        for c in ti.static(range(dim)):
+            v[c] = a[k, c]
     return v
+
+
+@ti.func
+def set_row(a: ti.template(), k, v):
+    """Store the vector v as row k of `a` (either layout of `row`)."""
+    if ti.static(vector_rows(a)):
+        a[k] = v
+    else:
+        for c in ti.static(range(v.n)):
+            a[k, c] = v[c]
 
 
 @ti.func
@@ -265,7 +285,7 @@ def permute_rows(src: nd, dst: nd, perm: nd):
 
 @ti.kernel
 def permute(src: nd, dst: nd, perm: nd):
-    """dst[perm[i]] = src[i] for an (N,) array."""
+    """dst[perm[i]] = src[i] for an (N,) array (of scalars or of vectors)."""
     for i in range(src.shape[0]):
         dst[perm[i]] = src[i]
 
@@ -365,12 +385,13 @@ class Grid:
 def _image(pos: ti.template(), k, xi, s, first: ti.template()):
     """d = pos[k] + s - xi per component, the shift s skipped below component `first`
     (the same additions, in the same order, as the 2D-only code wrote out)."""
+    p = row(pos, k, xi.n)
     d = ti.Vector.zero(float, xi.n)
     for a in ti.static(range(xi.n)):
         if ti.static(a < first):
-            d[a] = pos[k, a] - xi[a]
+            d[a] = p[a] - xi[a]
         else:
-            d[a] = pos[k, a] + s[a] - xi[a]
+            d[a] = p[a] + s[a] - xi[a]
     return d
 
 
