@@ -51,9 +51,9 @@ REFERENCE_N = 1_000_000
 # Kernel (Python function) names by the part of a step they belong to; "interaction" is
 # every other kernel, "transfers" Taichi's own copy kernels.
 PARTS = {
-    "grid": {"_bbox_blocks", "_assign", "_scan", "_scatter_serial", "_scatter_parallel",
-             "permute_rows", "permute", "_permute", "_scan_scatter", "max_count",
-             "bucket_aggregates"},
+    "grid": {"_bbox_blocks", "_assign", "_scan", "_scan_blocked", "_scatter_serial",
+             "_scatter_parallel", "permute_rows", "permute", "_permute", "_scan_scatter",
+             "max_count", "bucket_aggregates"},
     "observables": {"_arc_buckets", "_largest_gap", "reset_parent", "count_roots", "graph",
                     "flatten", "observe", "velocity"},
     "transfers": {"ndarray_to_ext_arr", "ext_arr_to_ndarray"},
