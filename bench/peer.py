@@ -44,7 +44,6 @@ def flocklab_one(n: int, steps: int, precision: str) -> dict:
 
     def scenario(k: int, size: int = n) -> Scenario:
         doc = dimensions.vicsek(size, 2)
-        doc["neighbours"]["inclusive"] = False  # the peer's strict |r_ij| < r
         doc["time"]["steps"] = k
         doc["recording"] = {"every": 0, "observables_every": k}
         doc["precision"] = precision
