@@ -4,7 +4,8 @@
     python -m bench.dimensions --models vicsek flocking formation --precision float64
     python -m bench.dimensions --n 100000 --steps 10
 
-Vicsek: density 4, r = 1, full noise, v0 = 0.5 (the hand-written peer kernel's workload).
+Vicsek: density 4, r = 1 strict, full noise, v0 = 0.5 (the hand-written peer kernel's
+workload; bench/peer.py runs the peer beside it).
 Flocking (switching topology) and formation (F1, F2): the workloads of bench/bench.py
 (bench/workload_flocking.py, bench/workload_formation.py) and their 3D counterparts, the
 same with a third coordinate: the lattice of spacing 1 becomes a cubic one (about 33
@@ -33,7 +34,7 @@ def vicsek(n: int, dim: int) -> dict:
         "model": {"kind": "vicsek", "rule": "vicsek", "v0": 0.5, "eta": 6.283185307179586,
                   "track_linked_intervals": False},
         "space": {"kind": "periodic", "L": (n / 4) ** (1 / dim), "dimension": dim},
-        "neighbours": {"radius": 1.0},
+        "neighbours": {"radius": 1.0, "inclusive": False},  # the peer's strict |r_ij| < r
         "initial": {"kind": "random", "N": n},
         "time": {"steps": 10, "dt": 1.0},
         "recording": {"every": 0},

@@ -38,8 +38,9 @@ class DevicePolicy:
     handed to every grid, so a test can build a GPU variant on the CPU."""
 
     serial_scatter: bool
-    """The serial stable scatter (fastest on a CPU), or atomic slots then a per-bucket sort
-    by old index (a GPU); both give the same permutation."""
+    """The serial scan and stable scatter (fastest on a CPU), or a blocked parallel scan and
+    atomic slots then a per-bucket sort by old index (a GPU); both give the same bucket
+    starts and permutation."""
     dense_grid: bool
     """Whether the plane may use the dense row-by-row grid (its scan is serial: a CPU's)."""
 

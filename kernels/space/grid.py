@@ -75,13 +75,33 @@ def _next_pow2(x: int) -> int:
     return 1 << max(4, (x - 1).bit_length())
 
 
+def vector_rows(a) -> bool:
+    """Whether a kernel's array argument holds vectors ((N,) of dim-vectors, one load per
+    row) rather than scalars ((N, dim), one load per component). Compile-time."""
+    return len(a.element_shape()) == 1
+
+
 @ti.func
 def row(a: ti.template(), k, dim: ti.template()):
-    """Row k of an (N, dim) array as a dim-vector."""
+    """Row k of an (N, dim) array, or element k of an (N,) array of dim-vectors, as a
+    dim-vector."""
     v = ti.Vector.zero(float, dim)
-    for c in ti.static(range(dim)):
-        v[c] = a[k, c]
+    if ti.static(vector_rows(a)):
+        v = a[k]
+    else:
+        for c in ti.static(range(dim)):
+            v[c] = a[k, c]
     return v
+
+
+@ti.func
+def set_row(a: ti.template(), k, v):
+    """Store the vector v as row k of `a` (either layout of `row`)."""
+    if ti.static(vector_rows(a)):
+        a[k] = v
+    else:
+        for c in ti.static(range(v.n)):
+            a[k, c] = v[c]
 
 
 @ti.func
@@ -147,7 +167,12 @@ def periodic_cell(xi, gf: ti.template(), nc):
     # alone would put it in cell 0, across the seam from its neighbours.
     c = ti.Vector.zero(ti.i32, xi.n)
     for a in ti.static(range(xi.n)):
-        c[a] = ti.min(int(ti.floor(xi[a] * inv)), nc - 1) % nc
+        c[a] = ti.min(int(ti.floor(xi[a] * inv)), nc - 1)
+        # "% nc" (floored, as Python's) changes only a negative coordinate: a branch, not
+        # an integer division per coordinate (two a step in the build and the visit
+        # each: a tenth of a float32 step at 10^6).
+        if c[a] < 0:
+            c[a] %= nc
     return c
 
 
@@ -227,6 +252,36 @@ def _scan(count: nd, start: nd, cursor: nd):
     start[count.shape[0]] = acc
 
 
+_SCAN_BLOCK = 256  # buckets per block of the parallel scan
+
+
+@ti.kernel
+def _scan_blocked(count: nd, start: nd, cursor: nd, part: nd):
+    # A GPU's exclusive scan (issue 8: the serial one is one thread on a GPU): each block
+    # sums its counts in parallel, one thread scans the block sums (N / 256 of them at
+    # most), and each block then scans its own counts from its offset. Integers: exactly
+    # the serial scan's starts.
+    nb = count.shape[0]
+    for blk in range(part.shape[0]):
+        s = 0
+        for b in range(blk * _SCAN_BLOCK, ti.min((blk + 1) * _SCAN_BLOCK, nb)):
+            s += count[b]
+        part[blk] = s
+    acc = 0
+    ti.loop_config(serialize=True)
+    for blk in range(part.shape[0]):
+        s = part[blk]
+        part[blk] = acc
+        acc += s
+    start[nb] = acc
+    for blk in range(part.shape[0]):
+        a = part[blk]
+        for b in range(blk * _SCAN_BLOCK, ti.min((blk + 1) * _SCAN_BLOCK, nb)):
+            start[b] = a
+            cursor[b] = a
+            a += count[b]
+
+
 @ti.kernel
 def _scatter_serial(key: nd, cursor: nd, perm: nd):
     # Stable counting-sort scatter: agents keep their relative order inside a bucket.
@@ -265,7 +320,7 @@ def permute_rows(src: nd, dst: nd, perm: nd):
 
 @ti.kernel
 def permute(src: nd, dst: nd, perm: nd):
-    """dst[perm[i]] = src[i] for an (N,) array."""
+    """dst[perm[i]] = src[i] for an (N,) array (of scalars or of vectors)."""
     for i in range(src.shape[0]):
         dst[perm[i]] = src[i]
 
@@ -286,8 +341,9 @@ class Grid:
     `periodic_L` set: the box [0, L)^dim with wrap-around; None: unbounded space.
     After `build(pos)`, `perm[i]` is agent i's slot in bucket order, and `view()` is what a
     visitor needs (bucket starts, cell ids, geometry) as a static tuple for kernels.
-    `policy.serial_scatter` picks the scatter: serial stable (the CPU's) or atomic slots then
-    a per-bucket sort by old index (a GPU's); both give the same `perm`.
+    `policy.serial_scatter` picks the build: a serial scan and a serial stable scatter (the
+    CPU's), or a blocked parallel scan and atomic slots then a per-bucket sort by old index
+    (a GPU's); both give the same `start` and `perm`.
     """
 
     def __init__(self, n: int, radius: float, periodic_L: float | None,
@@ -332,6 +388,8 @@ class Grid:
         self.cid = ti.ndarray(ti.i64, shape=n if not self.periodic else 1)
         self.cid_sorted = ti.ndarray(ti.i64, shape=n if not self.periodic else 1)
         self._src = None if self.serial else ti.ndarray(ti.i32, shape=n)
+        self._scan_part = None if self.serial else ti.ndarray(
+            ti.i32, shape=-(-n_buckets // _SCAN_BLOCK))
         self._bb_part = None if self.periodic else bbox_buffer(n, dim)
 
     def build(self, pos: ti.Ndarray, step: int = 0) -> None:
@@ -348,10 +406,11 @@ class Grid:
             self._gf_nd.from_numpy(self.gf)
         _assign(pos, self.key, self.cid, self.count, self._gf_nd, self._gi_nd, self.periodic,
                 self.dim)
-        _scan(self.count, self.start, self.cursor)
         if self.serial:
+            _scan(self.count, self.start, self.cursor)
             _scatter_serial(self.key, self.cursor, self.perm)
         else:
+            _scan_blocked(self.count, self.start, self.cursor, self._scan_part)
             _scatter_parallel(self.key, self.cursor, self.perm, self._src, self.start)
         if not self.periodic:
             permute(self.cid, self.cid_sorted, self.perm)
@@ -365,12 +424,13 @@ class Grid:
 def _image(pos: ti.template(), k, xi, s, first: ti.template()):
     """d = pos[k] + s - xi per component, the shift s skipped below component `first`
     (the same additions, in the same order, as the 2D-only code wrote out)."""
+    p = row(pos, k, xi.n)
     d = ti.Vector.zero(float, xi.n)
     for a in ti.static(range(xi.n)):
         if ti.static(a < first):
-            d[a] = pos[k, a] - xi[a]
+            d[a] = p[a] - xi[a]
         else:
-            d[a] = pos[k, a] + s[a] - xi[a]
+            d[a] = p[a] + s[a] - xi[a]
     return d
 
 

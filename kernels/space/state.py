@@ -6,25 +6,63 @@ in slot k. Outputs are always given back in agent-id order. `sort(grid, step)` d
 most once per step: a step and the observation of the same state share one sort.
 """
 
+from collections.abc import Collection
+
 import numpy as np
 import taichi as ti
 
 from ..runtime import as_real
-from .grid import Grid, permute, permute_rows
+from .grid import Grid, vector_rows
+
+nd = ti.types.ndarray()
+_PER_LAUNCH = 4  # arrays (the ids among them) one launch of _permute moves
+
+
+@ti.func
+def _move(src: ti.template(), dst: ti.template(), i, j):
+    """dst's slot j = src's slot i: an element (scalar or vector) or a row of (N, C)."""
+    if ti.static(vector_rows(src) or len(src.shape) == 1):
+        dst[j] = src[i]
+    else:
+        for c in range(src.shape[1]):
+            dst[j, c] = src[i, c]
+
+
+@ti.kernel
+def _permute(perm: nd, a: nd, a_out: nd, b: nd, b_out: nd, c: nd, c_out: nd, d: nd,
+             d_out: nd, m: ti.template()):
+    # The first m of (a, b, c, d) in one pass over perm, which a launch per array read
+    # once per array.
+    for i in range(perm.shape[0]):
+        j = perm[i]
+        _move(a, a_out, i, j)
+        if ti.static(m > 1):
+            _move(b, b_out, i, j)
+        if ti.static(m > 2):
+            _move(c, c_out, i, j)
+        if ti.static(m > 3):
+            _move(d, d_out, i, j)
 
 
 class SortedState:
     """Named (N,) or (N, C) arrays of the runtime's float type plus `ids`, permuted
-    together."""
+    together. The (N, C) arrays named in `vectors` are held as (N,) arrays of C-vectors
+    (same bytes, same order): a kernel then reads a row with one vector load where an
+    (N, C) array costs a load, with its index arithmetic, per component (`grid.row` reads
+    either; to_numpy gives (N, C) for both)."""
 
-    def __init__(self, arrays: dict[str, np.ndarray]):
+    def __init__(self, arrays: dict[str, np.ndarray], vectors: Collection[str] = ()):
         self.n = len(next(iter(arrays.values())))
         self.cur: dict[str, ti.Ndarray] = {}
         self._buf: dict[str, ti.Ndarray] = {}
         for name, a in arrays.items():
-            self.cur[name] = ti.ndarray(float, shape=a.shape)
+            if name in vectors:
+                self.cur[name] = ti.Vector.ndarray(a.shape[1], float, shape=a.shape[0])
+                self._buf[name] = ti.Vector.ndarray(a.shape[1], float, shape=a.shape[0])
+            else:
+                self.cur[name] = ti.ndarray(float, shape=a.shape)
+                self._buf[name] = ti.ndarray(float, shape=a.shape)
             self.cur[name].from_numpy(as_real(a))
-            self._buf[name] = ti.ndarray(float, shape=a.shape)
         self.ids = ti.ndarray(ti.i32, shape=self.n)
         self.ids.from_numpy(np.arange(self.n, dtype=np.int32))
         self._ids_buf = ti.ndarray(ti.i32, shape=self.n)
@@ -47,12 +85,17 @@ class SortedState:
         return self.cur[name]
 
     def resort(self, grid: Grid) -> None:
-        """Move every array into the order of `grid.perm` (computed from `cur` positions)."""
-        for name, a in self.cur.items():
-            (permute_rows if len(a.shape) == 2 else permute)(a, self._buf[name], grid.perm)
-            self.cur[name], self._buf[name] = self._buf[name], a
-        permute(self.ids, self._ids_buf, grid.perm)
+        """Move every array into the order of `grid.perm` (computed from `cur` positions):
+        one launch for the ids and up to three arrays."""
+        pairs = [(self.ids, self._ids_buf)] + [(a, self._buf[name])
+                                               for name, a in self.cur.items()]
+        for g in range(0, len(pairs), _PER_LAUNCH):
+            group = pairs[g:g + _PER_LAUNCH]
+            padded = group + [pairs[0]] * (_PER_LAUNCH - len(group))  # unused: untouched
+            _permute(grid.perm, *[x for pair in padded for x in pair], len(group))
         self.ids, self._ids_buf = self._ids_buf, self.ids
+        for name in self.cur:
+            self.cur[name], self._buf[name] = self._buf[name], self.cur[name]
 
     def scratch(self, name: str) -> ti.Ndarray:
         """The spare buffer of `name`: a kernel may write the next state there, then `swap`."""

@@ -32,7 +32,7 @@ from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
 from ...space import rng, trig
 from ...space.graph import MetricGraph, count_roots, find, link, reset_parent
-from ...space.grid import Grid, make_visitor, row, within
+from ...space.grid import Grid, make_visitor, row, set_row, within
 from ...space.initial import initial_state
 from ...space.params import Slots
 from ...space.state import SortedState
@@ -55,7 +55,8 @@ def _arc_buckets(ew: nd, lo: nd, hi: nd):
         lo[b] = ti.math.inf
         hi[b] = -ti.math.inf
     for i in range(ew.shape[0]):
-        th = ti.atan2(ew[i, 1], ew[i, 0])
+        e = row(ew, i, 2)
+        th = ti.atan2(e[1], e[0])
         a = th - _TWO_PI * ti.floor(th / _TWO_PI)
         if a >= _TWO_PI:
             a -= _TWO_PI
@@ -97,9 +98,11 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
         # Branch-free accumulation: w is 1 for a neighbour, 0 otherwise.
         w = ti.cast(within(d.dot(d), prm[P.R2], inclusive), float)
         if ti.static(rule == RULES["vicsek"] and dim == 3):
-            acc += w * ti.math.vec4(ew[k, 0], ew[k, 1], ew[k, 2], 1.0)
+            ek = row(ew, k, 3)
+            acc += w * ti.math.vec4(ek[0], ek[1], ek[2], 1.0)
         elif ti.static(rule == RULES["vicsek"]):
-            acc += w * ti.math.vec3(ew[k, 0], ew[k, 1], 1.0)
+            ek = row(ew, k, 2)
+            acc += w * ti.math.vec3(ek[0], ek[1], 1.0)
         else:
             acc += w * ti.math.vec3(theta[k], 0.0, 1.0)
         if ti.static(with_graph):
@@ -170,14 +173,12 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
                 for c in ti.static(range(dim)):
                     if x[c] >= L:  # x - L floor(x / L) can round up to L itself
                         x[c] -= L
-            for c in ti.static(range(dim)):
-                pos_out[i, c] = x[c]
+            set_row(pos_out, i, x)
             if ti.static(rule != RULES["vicsek"]):
                 theta_out[i] = new
             # The unit vectors travel with the state: each heading's cos and sin (2D) are
             # computed once, here.
-            for c in ti.static(range(dim)):
-                ew_out[i, c] = e_new[c]
+            set_row(ew_out, i, e_new)
             v = new + x[0] + x[1] + e_new[0]  # NaN if any term is NaN or infinite
             if ti.static(dim == 3):
                 v += x[2] + e_new[1] + e_new[2]
@@ -213,7 +214,8 @@ class VicsekKernel(ModelKernel):
         arrays = {"pos": init.positions, "ew": ew}
         if p.rule != "vicsek":
             arrays["theta"] = theta
-        self.state = SortedState(arrays)
+        # Positions and unit vectors as rows of vectors: one load per neighbour candidate.
+        self.state = SortedState(arrays, vectors=("pos", "ew"))
         self._swap = tuple(arrays)
         self._no_theta = ti.ndarray(float, shape=1)  # stands in for theta (vicsek rule)
         self.grid = Grid(n, radius, L if self.periodic else None, policy, dim)
