@@ -8,14 +8,15 @@ Vicsek: density 4, r = 1 strict, full noise, v0 = 0.5 (the hand-written peer ker
 workload; bench/peer.py runs the peer beside it).
 Flocking (switching topology) and formation (F1, F2): the workloads of bench/bench.py
 (bench/workload_flocking.py, bench/workload_formation.py) and their 3D counterparts, the
-same with a third coordinate: the lattice of spacing 1 becomes a cubic one (about 33
-neighbours within R = 2 against 12 in 2D), the formation's square of one agent per d^2
-a cube of one per d^3, its hexagonal formation a cubic lattice, its leader's target
-(x, 0, 0). The rate is the difference of a 5-step and a (5 + STEPS)-step run, which cancels
-set-up: meant for N >= 10^5, where the steps dominate. Each (model, dimension, precision)
-runs in a fresh process; its memory is counted as bench/bench.py counts it
-(bench/memory.py): the peak resident memory of one 5-step run at N, less that of the
-process warmed at 20000 agents (imports, Taichi, compiled kernels), divided by N.
+same with a third coordinate: the lattice of spacing 1 becomes a cubic one (about 30
+neighbours within R = 2 against 11 in 2D, jitter included; `flocking/switching-sparse`
+spaces it 1.3 apart, about 16 neighbours, its 2D twin unchanged), the formation's square of
+one agent per d^2 a cube of one per d^3, its hexagonal formation a cubic lattice, its
+leader's target (x, 0, 0). The rate is the difference of a 5-step and a (5 + STEPS)-step
+run, which cancels set-up: meant for N >= 10^5, where the steps dominate. Each (model,
+dimension, precision) runs in a fresh process; its memory is counted as bench/bench.py
+counts it (bench/memory.py): the peak resident memory of one 5-step run at N, less that of
+the process warmed at 20000 agents (imports, Taichi, compiled kernels), divided by N.
 """
 
 from __future__ import annotations
@@ -41,13 +42,22 @@ def vicsek(n: int, dim: int) -> dict:
         "seed": 1}
 
 
-def flocking(n: int, dim: int) -> dict:
+def flocking(n: int, dim: int, spacing_3d: float = 1.0) -> dict:
     doc = workload_flocking.flocking_switching(n)
     doc.pop("name")
     doc["space"]["dimension"] = dim
     if dim == 3:
         doc["initial"]["region"]["low"] = [0.0, 0.0, 0.0]  # the cubic lattice
+        doc["initial"]["region"]["spacing"] = spacing_3d
+        doc["model"]["potential"]["d"] = spacing_3d  # the lattice at the desired distance
     return doc
+
+
+def flocking_like(n: int, dim: int) -> dict:
+    """The 3D flock nearer the 2D one's neighbourhood: a jittered cubic lattice of spacing
+    1.3 (and d = 1.3) has about 16 neighbours within R = 2 (spacing 1: about 30; the square
+    lattice: 11)."""
+    return flocking(n, dim, 1.3)
 
 
 def formation(design: str):
@@ -65,7 +75,9 @@ def formation(design: str):
     return make
 
 
-MODELS = {"vicsek": [("vicsek", vicsek)], "flocking": [("flocking/switching", flocking)],
+MODELS = {"vicsek": [("vicsek", vicsek)],
+          "flocking": [("flocking/switching", flocking),
+                       ("flocking/switching-sparse", flocking_like)],
           "formation": [("formation/F1", formation("F1")), ("formation/F2", formation("F2"))]}
 
 
