@@ -105,18 +105,19 @@ def set_row(a: ti.template(), k, v):
 
 
 @ti.func
-def space_cell(xi, gf: ti.template()):
-    """Integer cell coordinates of point xi in unbounded space (origin gf[2:], width gf[0])."""
+def space_cell(xi, gf: ti.template(), origin: ti.template()):
+    """Integer cell coordinates of point xi in unbounded space: cells of width gf[0] from
+    the corner gf[origin:] (the hashed grid's view keeps it at 2, the dense grid's at 1)."""
     inv = 1.0 / gf[0]
     c = ti.Vector.zero(ti.i32, xi.n)
     for a in ti.static(range(xi.n)):
-        c[a] = int(ti.floor((xi[a] - gf[2 + a]) * inv))
+        c[a] = int(ti.floor((xi[a] - gf[origin + a]) * inv))
     return c
 
 
 @ti.func
 def plane_cell(x, y, gf: ti.template()):
-    return space_cell(ti.math.vec2(x, y), gf)
+    return space_cell(ti.math.vec2(x, y), gf, 2)
 
 
 @ti.func
@@ -233,7 +234,7 @@ def _assign(
             nc = gi[0]
             b = flat_cell(periodic_cell(xi, gf, nc), nc)
         else:
-            c = space_cell(xi, gf)
+            c = space_cell(xi, gf, 2)
             b = cell_bucket(c, gi[1])
             cid[i] = cell_id(c)
         key[i] = b
@@ -522,7 +523,7 @@ def make_visitor(pair, half: bool = False, dim: int = 2):
                         d -= L * ti.round(d / L)
                         acc = pair(i, k, d, acc, S)
         else:
-            c = space_cell(xi, gf)
+            c = space_cell(xi, gf, 2)
             t = c
             for e in ti.static(plane_layers):
                 if ti.static(dim == 3):

@@ -23,19 +23,10 @@ import taichi as ti
 from .. import runtime
 from ..result import SimulationDiverged
 from ..runtime import DevicePolicy
-from .grid import Grid, bbox_buffer, bounding_box, max_cells_across, row, widen
+from .grid import Grid, bbox_buffer, bounding_box, max_cells_across, row, space_cell, widen
 
 nd = ti.types.ndarray()
 CELLS_PER_AGENT = 4
-
-
-@ti.func
-def _cell(xi, gf: ti.template()):
-    inv = 1.0 / gf[0]
-    c = ti.Vector.zero(ti.i32, xi.n)
-    for a in ti.static(range(xi.n)):
-        c[a] = int(ti.floor((xi[a] - gf[1 + a]) * inv))
-    return c
 
 
 @ti.func
@@ -52,7 +43,7 @@ def _assign(pos: nd, key: nd, count: nd, gf: nd, gi: nd, dim: ti.template()):
     for b in range(cells):
         count[b] = 0
     for i in range(pos.shape[0]):
-        c = _cell(row(pos, i, dim), gf)
+        c = space_cell(row(pos, i, dim), gf, 1)
         k = c[0] + gi[0] * c[1]
         if ti.static(dim == 3):
             k = c[0] + _row_start(c[1], c[2], gi)
@@ -145,7 +136,7 @@ def make_dense_visitor(pair, dim: int = 2):
     def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
               periodic: ti.template()):
         start, gf, gi = ti.static(G[0], G[2], G[3])
-        c = _cell(xi, gf)
+        c = space_cell(xi, gf, 1)
         lo = ti.max(c[0] - 1, 0)
         hi = ti.min(c[0] + 1, gi[0] - 1)
         for e in ti.static(layers):
