@@ -88,13 +88,36 @@ def run_batch(
 ) -> list[RunResult]:
     """Run `scenarios` (one batch key) to the end, to cancellation or to blow-up.
     `on_observations` (a single scenario only) gets the rows the kernels have written so
-    far, at window ends, batched as kernels/live.py says."""
+    far, at window ends, batched as kernels/live.py says. Results in input order."""
+    sinks = list(sinks) if sinks is not None else [None] * len(scenarios)
+    # The largest replicas first: the cores take replicas in batch order, so every window
+    # ends on a small one instead of leaving one core alone with a large one. A replica's
+    # bits do not depend on its place in the batch.
+    order = sorted(range(len(scenarios)), key=lambda b: -scenarios[b].n_agents)
+    results = _run_ordered(make, [scenarios[b] for b in order], [sinks[b] for b in order],
+                           backend, on_progress, should_stop, progress_interval,
+                           on_observations, observations_interval)
+    place = {b: j for j, b in enumerate(order)}
+    return [results[place[b]] for b in range(len(scenarios))]
+
+
+def _run_ordered(
+    make: Callable[[list[Scenario]], Batch],
+    scenarios: list[Scenario],
+    sinks: list[FrameSink | None],
+    backend: str,
+    on_progress: Callable[[int, int], None] | None,
+    should_stop: Callable[[], bool] | None,
+    progress_interval: float,
+    on_observations: ObservationsFn | None,
+    observations_interval: float,
+) -> list[RunResult]:
+    """`run_batch` with the replicas in launch order."""
     from .engine import time_to_converge
 
     t0 = time.perf_counter()
-    batch = make(list(scenarios))
+    batch = make(scenarios)
     setup = time.perf_counter() - t0
-    sinks = list(sinks) if sinks is not None else [None] * len(scenarios)
     steps = [s.time.steps for s in scenarios]
     last = max(steps)
     agents = sum(s.n_agents for s in scenarios)
