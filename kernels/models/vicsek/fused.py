@@ -32,7 +32,7 @@ import taichi as ti
 from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
 from ... import runtime
-from ...batch import FusedBatch
+from ...batch import FusedBatch, host_array
 from ...space import rng, trig
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import union_serial
@@ -670,19 +670,17 @@ class VicsekBatch(FusedBatch):
             ew[a0:a1] = init.directions if dim == 3 else np.stack([np.cos(th), np.sin(th)],
                                                                    axis=1)
 
-        def arr(a: np.ndarray, dtype=float) -> ti.Ndarray:
-            a = runtime.as_real(a) if dtype is float else a
-            out = ti.ndarray(dtype, shape=a.shape)
-            out.from_numpy(a)
-            return out
+        # numpy arrays the kernel runs on in place (FusedBatch): no from/to-numpy kernels.
+        def arr(a: np.ndarray, dtype: Any = float) -> np.ndarray:
+            return host_array(a, runtime.real() if dtype is float else dtype)
 
-        def scratch(shape, dtype=float) -> ti.Ndarray:
-            return ti.ndarray(dtype, shape=shape)
+        def scratch(shape, dtype: Any = float) -> np.ndarray:
+            return arr(np.zeros(shape), dtype)
 
-        i32 = ti.i32
+        i32 = np.int32
         self.args = dict(
             aoff=arr(self.aoff, i32), coff=arr(self.coff, i32), ooff=arr(self.ooff, i32),
-            prm=arr(prm), iprm=arr(iprm, i32), kseed=arr(kseed, ti.u32),
+            prm=arr(prm), iprm=arr(iprm, i32), kseed=arr(kseed, np.uint32),
             pos=arr(pos), ew=arr(ew), theta=arr(theta), ps=scratch((total, 2 * dim)),
             cell=scratch(total, i32), cstart=scratch(int(self.coff[-1]), i32),
             cidx=scratch(total, i32), parent=scratch(total, i32),
