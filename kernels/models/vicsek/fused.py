@@ -523,95 +523,113 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
             v += x[2] + e_new[1] + e_new[2]
         return ti.cast(ti.math.isnan(v) or ti.math.isinf(v), ti.i32)
 
-    @ti.kernel
-    def advance(s0: ti.i32, s1: ti.i32, aoff: nd, coff: nd, ooff: nd, prm: nd, iprm: nd,
-                kseed: nd, pos: nd, ew: nd, theta: nd, ps: nd, cell: nd, cstart: nd,
-                cidx: nd, parent: nd,
-                parent_u: nd, deg: nd, arc_lo: nd, arc_hi: nd, obs: nd):
-        for t in range((aoff.shape[0] - 1) * SPREAD):
-            if t % SPREAD == 0:  # one replica per CPU task
-                b = t // SPREAD
-                a0 = aoff[b]
-                n = aoff[b + 1] - a0
-                c0 = coff[b]
-                cap = coff[b + 1] - c0 - 1
-                Lb = prm[b, P.L]
-                r2 = prm[b, P.R2]
-                radius = prm[b, P.RADIUS]
-                move_new = iprm[b, IP.MOVE_NEW]
-                steps = iprm[b, IP.STEPS]
-                every = iprm[b, IP.EVERY]
-                track = iprm[b, IP.TRACK] != 0
-                s = s0
-                while s < s1 and s <= steps and iprm[b, IP.BAD] < 0:
-                    observing = s % every == 0 or s == steps
-                    graph = observing and iprm[b, IP.WANT_COMPONENTS] != 0
-                    grid = build_cells(a0, n, c0, cap, Lb, radius, pos, ew, theta, ps, cell,
-                                       cstart, cidx, parent)
-                    nc = ti.math.ivec3(ti.cast(grid[0], ti.i32), ti.cast(grid[1], ti.i32),
-                                       ti.cast(grid[2], ti.i32))
-                    # Farther than this from a cell's side, no agent across it is within r,
-                    # whatever the rounding of cells and distances (float32 included).
-                    far = radius * 1.001 + 1e-5 * grid[3] * ti.max(grid[0], grid[1], grid[2])
-                    for c in ti.static(range(dim)):
-                        far += 1e-5 * ti.abs(grid[4 + c])
-                    if nc[0] < 0:
-                        iprm[b, IP.BAD] = s
-                        iprm[b, IP.CAUSE] = 1
-                        break
-                    nx = nc[0]
-                    ny = nc[1]
-                    tracking = track and s < steps
-                    key0 = _key(kseed[b, 0], s)
-                    key1 = _key(kseed[b, 1], s)
-                    bad = 0
-                    # Slot k's cell, followed along the slots (they are in cell order): no
-                    # division per agent.
-                    cc = ti.math.ivec3(0)
-                    cend = a0 + cstart[c0 + 1] if nx > 0 else a0 + n
-                    for k in range(a0, a0 + n):
-                        # X(s + 1) is written over X(s) in id order as we go: the visit
-                        # reads only the slot-order copy, so the update stays synchronous.
-                        while k >= cend:
-                            cc[0] += 1
-                            if cc[0] == nx:
-                                cc[0] = 0
-                                cc[1] += 1
-                                if ti.static(dim == 3):
-                                    if cc[1] == ny:
-                                        cc[1] = 0
-                                        cc[2] += 1
-                            cend = a0 + cstart[c0 + cc[0] + nx * (cc[1] + ny * cc[2]) + 1]
-                        i = cidx[k]
-                        lo, hi = reach(k, cc, grid, far, ps)
-                        acc = ti.Vector.zero(float, dim + 1)
-                        if ti.static(full):
-                            if graph or tracking:  # the components and Theorem 2's forest
-                                acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, True, graph,
-                                           tracking, ps, cstart, cidx, parent, parent_u)
-                            else:
-                                acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, False, graph,
-                                           tracking, ps, cstart, cidx, parent, parent_u)
-                        else:
-                            acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, False, graph,
-                                       tracking, ps, cstart, cidx, parent, parent_u)
-                        deg[k] = ti.cast(acc[dim], ti.i32) - 1  # the closed set holds i
-                        if s < steps:
-                            bad |= update(b, i, k, a0, acc, Lb, key0, key1, move_new, prm, ps,
-                                          pos, ew, theta)
-                    if observing:
-                        row = ooff[b] + iprm[b, IP.NOBS]
-                        iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
-                        observe(b, a0, n, s, row, ps, parent, deg, arc_lo, arc_hi, prm, iprm,
-                                obs)
-                    if s < steps:
-                        if ti.static(full):
-                            if track:
-                                close_linked(b, a0, n, s, parent_u, iprm)
-                        if bad != 0:
-                            iprm[b, IP.BAD] = s
-                    s += 1
+    @ti.func
+    def replica(b, s0, s1, aoff: ti.template(), coff: ti.template(), ooff: ti.template(),
+                prm: ti.template(), iprm: ti.template(), kseed: ti.template(),
+                pos: ti.template(), ew: ti.template(), theta: ti.template(),
+                ps: ti.template(), cell: ti.template(), cstart: ti.template(),
+                cidx: ti.template(), parent: ti.template(), parent_u: ti.template(),
+                deg: ti.template(), arc_lo: ti.template(), arc_hi: ti.template(),
+                obs: ti.template()):
+        """Replica b from step s0 towards s1 (serially: its steps, then its agents)."""
+        a0 = aoff[b]
+        n = aoff[b + 1] - a0
+        c0 = coff[b]
+        cap = coff[b + 1] - c0 - 1
+        Lb = prm[b, P.L]
+        r2 = prm[b, P.R2]
+        radius = prm[b, P.RADIUS]
+        move_new = iprm[b, IP.MOVE_NEW]
+        steps = iprm[b, IP.STEPS]
+        every = iprm[b, IP.EVERY]
+        track = iprm[b, IP.TRACK] != 0
+        s = s0
+        while s < s1 and s <= steps and iprm[b, IP.BAD] < 0:
+            observing = s % every == 0 or s == steps
+            graph = observing and iprm[b, IP.WANT_COMPONENTS] != 0
+            grid = build_cells(a0, n, c0, cap, Lb, radius, pos, ew, theta, ps, cell,
+                               cstart, cidx, parent)
+            nc = ti.math.ivec3(ti.cast(grid[0], ti.i32), ti.cast(grid[1], ti.i32),
+                               ti.cast(grid[2], ti.i32))
+            # Farther than this from a cell's side, no agent across it is within r,
+            # whatever the rounding of cells and distances (float32 included).
+            far = radius * 1.001 + 1e-5 * grid[3] * ti.max(grid[0], grid[1], grid[2])
+            for c in ti.static(range(dim)):
+                far += 1e-5 * ti.abs(grid[4 + c])
+            if nc[0] < 0:
+                iprm[b, IP.BAD] = s
+                iprm[b, IP.CAUSE] = 1
+                break
+            nx = nc[0]
+            ny = nc[1]
+            tracking = track and s < steps
+            key0 = _key(kseed[b, 0], s)
+            key1 = _key(kseed[b, 1], s)
+            bad = 0
+            # Slot k's cell, followed along the slots (they are in cell order): no
+            # division per agent.
+            cc = ti.math.ivec3(0)
+            cend = a0 + cstart[c0 + 1] if nx > 0 else a0 + n
+            for k in range(a0, a0 + n):
+                # X(s + 1) is written over X(s) in id order as we go: the visit
+                # reads only the slot-order copy, so the update stays synchronous.
+                while k >= cend:
+                    cc[0] += 1
+                    if cc[0] == nx:
+                        cc[0] = 0
+                        cc[1] += 1
+                        if ti.static(dim == 3):
+                            if cc[1] == ny:
+                                cc[1] = 0
+                                cc[2] += 1
+                    cend = a0 + cstart[c0 + cc[0] + nx * (cc[1] + ny * cc[2]) + 1]
+                i = cidx[k]
+                lo, hi = reach(k, cc, grid, far, ps)
+                acc = ti.Vector.zero(float, dim + 1)
+                if ti.static(full):
+                    if graph or tracking:  # the components and Theorem 2's forest
+                        acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, True, graph,
+                                   tracking, ps, cstart, cidx, parent, parent_u)
+                    else:
+                        acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, False, graph,
+                                   tracking, ps, cstart, cidx, parent, parent_u)
+                else:
+                    acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, False, graph,
+                               tracking, ps, cstart, cidx, parent, parent_u)
+                deg[k] = ti.cast(acc[dim], ti.i32) - 1  # the closed set holds i
+                if s < steps:
+                    bad |= update(b, i, k, a0, acc, Lb, key0, key1, move_new, prm, ps,
+                                  pos, ew, theta)
+            if observing:
+                row = ooff[b] + iprm[b, IP.NOBS]
+                iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
+                observe(b, a0, n, s, row, ps, parent, deg, arc_lo, arc_hi, prm, iprm,
+                        obs)
+            if s < steps:
+                if ti.static(full):
+                    if track:
+                        close_linked(b, a0, n, s, parent_u, iprm)
+                if bad != 0:
+                    iprm[b, IP.BAD] = s
+            s += 1
 
+
+    @ti.kernel
+    def advance(s0: ti.i32, s1: ti.i32, tasks: ti.i32, queue: nd, aoff: nd, coff: nd,
+                ooff: nd, prm: nd, iprm: nd, kseed: nd, pos: nd, ew: nd, theta: nd, ps: nd,
+                cell: nd, cstart: nd, cidx: nd, parent: nd, parent_u: nd, deg: nd,
+                arc_lo: nd, arc_hi: nd, obs: nd):
+        # One CPU task per worker thread; each takes the next replica from the queue
+        # until none is left. Replicas tied to tasks (one per task) were dealt to the
+        # threads in contiguous blocks, so a batch ordered by size (N = 400 runs, then N
+        # = 100 ones) left one thread with 4x the work of the other.
+        for t in range(tasks * SPREAD):
+            if t % SPREAD == 0:
+                b = ti.atomic_add(queue[0], 1)
+                while b < aoff.shape[0] - 1:
+                    replica(b, s0, s1, aoff, coff, ooff, prm, iprm, kseed, pos, ew, theta, ps,
+                            cell, cstart, cidx, parent, parent_u, deg, arc_lo, arc_hi, obs)
+                    b = ti.atomic_add(queue[0], 1)
     return advance
 
 
@@ -692,6 +710,8 @@ class VicsekBatch(FusedBatch):
             obs=arr(np.zeros((int(self.ooff[-1]), N_OBS))),
         )
         self._order = list(self.args)
+        self.queue = host_array(np.zeros(1), np.int32)  # the next replica to take
+        self.tasks = min(B, runtime.current().threads)
 
     @property
     def n_replicas(self) -> int:
@@ -700,7 +720,8 @@ class VicsekBatch(FusedBatch):
     def advance(self, s0: int, s1: int) -> None:
         """Advance every replica from step s0 towards s1 (each stops at its own end)."""
         self.invalidate()
-        self.kernel(s0, s1, *(self.args[k] for k in self._order))
+        self.queue[0] = 0
+        self.kernel(s0, s1, self.tasks, self.queue, *(self.args[k] for k in self._order))
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         o0 = self.ooff[b]
