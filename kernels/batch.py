@@ -54,6 +54,11 @@ class FusedBatch:
 
     args: dict[str, Any]
     STEPS = 0  # iprm slot of each replica's last step
+    # Whether the kernel's threads take replicas from a queue, each the next one left (then
+    # the driver hands them over largest first); else each CPU task runs one replica, and
+    # the tasks go to the threads in contiguous blocks, so the driver keeps the input order
+    # (largest first would give one thread all the large replicas).
+    QUEUED = False
     dimensions: tuple[int, ...] = (2,)  # the values of space.dimension the kernel runs
 
     def end_at(self, step: int) -> None:
@@ -118,10 +123,12 @@ def run_batch(
     `on_observations` (a single scenario only) gets the rows the kernels have written so
     far, at window ends, batched as kernels/live.py says. Results in input order."""
     sinks = list(sinks) if sinks is not None else [None] * len(scenarios)
-    # The largest replicas first: the cores take replicas in batch order, so every window
-    # ends on a small one instead of leaving one core alone with a large one. A replica's
-    # bits do not depend on its place in the batch.
-    order = sorted(range(len(scenarios)), key=lambda b: -scenarios[b].n_agents)
+    # From a queue, the largest replicas first: every window then ends on a small one
+    # instead of leaving one core alone with a large one. A replica's bits do not depend
+    # on its place in the batch.
+    order = list(range(len(scenarios)))
+    if getattr(make, "QUEUED", False):
+        order.sort(key=lambda b: -scenarios[b].n_agents)
     results = _run_ordered(make, [scenarios[b] for b in order], [sinks[b] for b in order],
                            backend, on_progress, should_stop, progress_interval,
                            on_observations, observations_interval)

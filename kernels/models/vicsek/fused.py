@@ -638,6 +638,7 @@ class VicsekBatch(FusedBatch):
     and dimension), advanced window by window by `advance_kernel`."""
 
     dimensions = (2, 3)
+    QUEUED = True  # `advance`'s threads take replicas from a queue
 
     def __init__(self, scenarios: list[Scenario]):
         from ...space.initial import initial_state
