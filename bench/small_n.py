@@ -3,6 +3,7 @@
     python -m bench.small_n                 # single runs at N = 10, 100, 1000, 4000, then
                                             # the reduced Fig. 2a sweep, both implementations
     python -m bench.small_n --single        # single runs only
+    python -m bench.small_n --sweep-only    # the reduced Fig. 2a sweep only
     python -m bench.small_n --full-fig2a    # also time the full Fig. 2a protocol preset
 
 Single runs: Vicsek rule, density 4, r = 1 (<=), eta = 0.5, new-heading move, 3000 steps,
@@ -155,10 +156,14 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[10, 100, 1000, 4000])
     ap.add_argument("--steps", type=int, default=3000)
-    ap.add_argument("--single", action="store_true", help="single runs only")
+    only = ap.add_mutually_exclusive_group()
+    only.add_argument("--single", action="store_true", help="single runs only")
+    only.add_argument("--sweep-only", action="store_true",
+                      help="the reduced Fig. 2a sweep only (and --full-fig2a if given)")
     ap.add_argument("--full-fig2a", action="store_true", help="also the full protocol")
     args = ap.parse_args(argv)
-    single(args.sizes, args.steps)
+    if not args.sweep_only:
+        single(args.sizes, args.steps)
     if not args.single:
         fig2a_sweep()
         if args.full_fig2a:

@@ -57,6 +57,25 @@ def sweep_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerPro
         _cleanup(s)
 
 
+@pytest.fixture(scope="module")
+def long_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    """A server admitting runs long enough (0.1-0.3 s each) to cancel or kill a sweep in
+    the middle: on the fused path a whole sweep within SWEEP_ENV's 10^6 agent-steps takes
+    about 0.1 s, less than a poll can be sure to catch."""
+    env = {**SWEEP_ENV, "FLOCKLAB_MAX_SWEEP_AGENT_STEPS": "20000000"}
+    s = ServerProcess(tmp_path_factory.mktemp("long") / "data", env=env).start()
+    try:
+        yield s
+    finally:
+        _cleanup(s)
+
+
+@pytest.fixture
+def long_http(long_server: ServerProcess) -> Iterator[httpx.Client]:
+    with httpx.Client(base_url=long_server.url, timeout=30) as c:
+        yield c
+
+
 @pytest.fixture
 def http(sweep_server: ServerProcess) -> Iterator[httpx.Client]:
     with httpx.Client(base_url=sweep_server.url, timeout=30) as c:
@@ -149,9 +168,10 @@ def test_progress_over_sse(http: httpx.Client):
     assert done_counts == sorted(done_counts) and all(s["runs_total"] == 3 for s in states)
 
 
-def test_cancel_keeps_the_finished_runs(http: httpx.Client):
-    # 12 runs of ~0.5-1 s each: long enough to cancel in the middle.
-    long = submit(http, sweep_spec(etas=(0.5, 1.0, 2.0, 3.0), replicas=3, n=200, steps=400,
+def test_cancel_keeps_the_finished_runs(long_http: httpx.Client):
+    http = long_http
+    # 12 runs of 1.5e6 agent-steps (0.1-0.3 s each): long enough to cancel in the middle.
+    long = submit(http, sweep_spec(etas=(0.5, 1.0, 2.0, 3.0), replicas=3, n=1000, steps=1500,
                                    name="long"))
     queued = submit(http, sweep_spec(name="queued"))  # one worker: waits behind `long`
     wait_sweep(http, long["id"], until=lambda s: s["runs_done"] >= 1)
@@ -271,12 +291,13 @@ def _worker_pids(server: ServerProcess) -> list[int]:
 
 
 def test_worker_killed_mid_sweep_resumes_without_redoing_runs(
-        http: httpx.Client, sweep_server: ServerProcess):
-    created = submit(http, sweep_spec(etas=(0.5, 1.5, 3.0), replicas=3, n=200, steps=300,
+        long_http: httpx.Client, long_server: ServerProcess):
+    http = long_http
+    created = submit(http, sweep_spec(etas=(0.5, 1.5, 3.0), replicas=3, n=1000, steps=1500,
                                       name="killed"))
     before = wait_sweep(http, created["id"], until=lambda s: s["runs_done"] >= 2)
     assert before["status"] == "running"
-    workers = _worker_pids(sweep_server)
+    workers = _worker_pids(long_server)
     assert len(workers) == 1
     killed_at = time.time()
     os.kill(workers[0], signal.SIGKILL)
@@ -285,7 +306,7 @@ def test_worker_killed_mid_sweep_resumes_without_redoing_runs(
     assert done["attempts"] == 2 and done["runs_done"] == done["runs_total"] == 9
     assert done["runs_failed"] == 0
 
-    folder = sweep_server.data_dir / "results" / created["id"]
+    folder = long_server.data_dir / "results" / created["id"]
     journal = [json.loads(line) for line in (folder / "runs.jsonl").read_text().splitlines()
                if line.strip()]
     assert sorted(r["run"] for r in journal) == list(range(9))  # no run counted twice
