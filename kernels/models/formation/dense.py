@@ -34,11 +34,12 @@ def stencil_reach(densest: int) -> int:
 
 
 @ti.kernel
-def max_count(start: nd) -> ti.i32:
-    """The most agents in one bucket, from the buckets' starts (the exclusive scan of their
-    counts, one entry longer): the grid may reuse its counts once scanned."""
+def max_count(start: nd, buckets: ti.i32) -> ti.i32:
+    """The most agents in one of the first `buckets` buckets, from their starts (the
+    exclusive scan of their counts, one entry longer): the grid may reuse its counts once
+    scanned, and a dense grid's start array may be longer than its cells."""
     m = 0
-    for b in range(start.shape[0] - 1):
+    for b in range(buckets):
         ti.atomic_max(m, start[b + 1] - start[b])
     return m
 

@@ -6,7 +6,9 @@ Right-hand side, for every agent at once from the state at time t (eq. 1-2, 6, 1
   l_i = r_id(t) = p(t) + b_i(t) (F1, eq. 3)  or  r_0(t) = p(t) (F2, eq. 5)
 Integrators: explicit Euler r(t + dt) = r(t) + dt rdot(t); classical RK4 with stages at t,
 t + dt/2, t + dt (each stage re-buckets its positions, so neighbours are always exact).
-Neighbours come from the uniform grid (cell = d); g(d) = 0, so < and <= give the same forces.
+Neighbours come from the plane's grid of cells of side d (kernels/space/plane_grid.py: row-major
+dense cells while the swarm is compact on a CPU, else the hashed grid); g(d) = 0, so < and <=
+give the same forces.
 Above `max_exact_candidates` an Euler step coarse-grains far pairs (dense.py).
 Two agents at the same position (g singular) stop the run.
 
@@ -14,9 +16,9 @@ Observables (at observation steps only): formation error against r_id + a with t
 eq. 8, the centroid's distance to p(t), speeds against the leader's, the minimum pairwise
 distance, V1 (eq. 10) or V2 (eq. 16), and for F2 the properties D1-D3.
 
-3D (`space.dimension = 3`): the same kernels compiled with dim = 3 on the hashed grid's
-27 cells; p(t), b_i(t) and the rates are 3-vectors; `leader_z` and `centroid_z` join the
-observables. The dense regime (dense.py) is 2D: 3D steps are always exact.
+3D (`space.dimension = 3`): the same kernels compiled with dim = 3 on the grid's 27 cells;
+p(t), b_i(t) and the rates are 3-vectors; `leader_z` and `centroid_z` join the observables.
+The dense regime (dense.py) is 2D: 3D steps are always exact.
 """
 
 from functools import cache
@@ -36,6 +38,7 @@ from ...space.graph import MetricGraph, count_roots, flatten
 from ...space.grid import Grid, make_visitor, permute, permute_rows, row, within
 from ...space.initial import initial_state
 from ...space.integrate import count_nonfinite, gather_rows, rk4_begin, rk4_finish, rk4_stage
+from ...space.plane_grid import PlaneGrid, make_dense_visitor
 from ...space.state import SortedState
 from ...space.stream import PairwiseSum, Rows, RowSum, blocks
 from .dense import bucket_aggregates, coarse_euler, max_count, stencil_reach
@@ -65,8 +68,9 @@ _NO_PAIR = 1e300  # nearest-candidate sentinel
 
 @cache
 def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: bool,
-                      dim: int = 2):
-    """Compile-time specialised kernels: one Euler step, rates at a time slot, observation.
+                      dim: int = 2, search: str = "hash"):
+    """Compile-time specialised kernels: one Euler step, rates at a time slot, observation,
+    over the grid layout `search` (PlaneGrid.layout: "dense" or "hash").
     Positions are dim-vectors (2 or 3); the rate accumulator holds the dim components of
     the repulsion, then the count of coincident neighbours."""
     lead = leader if dim == 2 else leader_3d
@@ -106,8 +110,10 @@ def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: 
                     acc[CO] += 1.0
         return acc
 
-    visit_rate = make_visitor(pair_rate, dim=dim)
-    visit_obs = make_visitor(pair_obs, dim=dim)
+    def make(pair):
+        return make_dense_visitor(pair, dim) if search == "dense" else make_visitor(pair, dim=dim)
+
+    visit_rate, visit_obs = make(pair_rate), make(pair_obs)
 
     @ti.func
     def rate(i, pos: ti.template(), ids: ti.template(), ba: ti.template(), bb: ti.template(),
@@ -198,7 +204,7 @@ class FormationKernel(ModelKernel):
                          else None)
         self.state = SortedState({"pos": init.positions})
         del init  # the host positions, before the other device arrays
-        self.grid = Grid(n, d, None, policy, dim)
+        self.grid = PlaneGrid(n, d, policy, dim)
         self.graph: MetricGraph | None = None
         self.prm_host = force_params(p, d, dt, dim)
         self.prm = ti.ndarray(float, shape=self.prm_host.shape)
@@ -212,7 +218,7 @@ class FormationKernel(ModelKernel):
         self.gkind = G_KINDS[p.repulsion.kind]
         self.inclusive = scenario.inclusive
         if p.integrator == "rk4":
-            self.grid2 = Grid(n, d, None, policy, dim)
+            self.grid2 = PlaneGrid(n, d, policy, dim)
             self.tmp_pos = ti.ndarray(float, shape=(n, dim))
             self.tmp_ids = ti.ndarray(ti.i32, shape=n)
             # RK4's stage state, rates and weighted sum of the rates (kernels/space/integrate.py)
@@ -252,9 +258,10 @@ class FormationKernel(ModelKernel):
         self.prm.from_numpy(as_real(self.prm_host))
         return any(self.b_held[1] in w for w in weights)
 
-    def _kernels(self, blend: bool):
+    def _kernels(self, blend: bool, grid: PlaneGrid):
+        """(euler, rates, observe) for positions bucketed in `grid` (its layout as built)."""
         return formation_kernels(self.fkind, self.gkind, self.f1, blend, self.inclusive,
-                                 self.dim)
+                                 self.dim, grid.layout)
 
     # --- stepping -------------------------------------------------------------------------
 
@@ -277,7 +284,7 @@ class FormationKernel(ModelKernel):
         self.state.sort(self.grid, step)
         if self.cap is None:
             return 1
-        densest = max_count(self.grid.start)
+        densest = max_count(self.grid.view()[0], self._cells())
         if 9 * densest <= self.cap:
             return 1
         m = stencil_reach(densest)
@@ -294,6 +301,14 @@ class FormationKernel(ModelKernel):
         bucket_aggregates(self.state["pos"], start, cid, *self.agg)
         return m
 
+    def _cells(self) -> int:
+        """The cells (buckets) of the d-grid as last built: a dense grid's start array has
+        room for more."""
+        g = self.grid
+        if g.layout == "dense":
+            return int(np.prod(g.view()[3].to_numpy()))
+        return g.hashed.n_buckets
+
     def step(self, step: int) -> None:
         st = self.state
         t = step * self.dt
@@ -305,7 +320,7 @@ class FormationKernel(ModelKernel):
                 self.max_reach = max(self.max_reach, m)
             blend = self._load_times([t])
             if m == 1:
-                euler, _, _ = self._kernels(blend)
+                euler, _, _ = self._kernels(blend, self.grid)
                 euler(st["pos"], st.ids, *self.b_dev, st.scratch("pos"), self.prm, self.bad,
                       *self.grid.view())
             else:
@@ -318,24 +333,25 @@ class FormationKernel(ModelKernel):
             return
         self.state.sort(self.grid, step)
         blend = self._load_times([t, t + 0.5 * self.dt, t + self.dt])
-        _, rates, _ = self._kernels(blend)
+        _, rates, _ = self._kernels(blend, self.grid)
         x, b, h = st["pos"], self.rk4, self.dt
         rk4_begin(x, b["ys"], b["yk"])
         rates(x, st.ids, *self.b_dev, b["k"], self.prm, 0, self.bad, *self.grid.view())
         for slot, w, c in ((1, 1.0, 0.5 * h), (1, 2.0, 0.5 * h), (2, 2.0, h)):
             rk4_stage(x, b["ys"], b["k"], b["yk"], w, c)
-            self._rates_at(b["ys"], slot, b["k"], rates, step)
+            self._rates_at(b["ys"], slot, b["k"], blend, step)
         rk4_finish(x, b["k"], b["yk"], h / 6.0, st.scratch("pos"))
         count_nonfinite(st.scratch("pos"), self.bad)
         self._check(step)
         st.swap("pos")
         self.now = step + 1
 
-    def _rates_at(self, y, slot: int, out, rates, step: int) -> None:
-        """rdot at positions y (storage order): bucket y on a second grid, evaluate there,
-        bring the rates back to storage order."""
+    def _rates_at(self, y, slot: int, out, blend: bool, step: int) -> None:
+        """rdot at positions y (storage order): bucket y on a second grid, evaluate there
+        (with the kernel of that grid's layout), bring the rates back to storage order."""
         g2 = self.grid2
         g2.build(y, step)
+        _, rates, _ = self._kernels(blend, g2)
         permute_rows(y, self.tmp_pos, g2.perm)
         permute(self.state.ids, self.tmp_ids, g2.perm)
         # The rates in g2's order go to the state's spare buffer, which only the step's
@@ -354,7 +370,7 @@ class FormationKernel(ModelKernel):
         self.state.sort(self.grid, step)
         st = self.state
         blend = self._load_times([step * self.dt])
-        _, _, observe = self._kernels(blend)
+        _, _, observe = self._kernels(blend, self.grid)
         if self.aux is None:
             self.aux = ti.ndarray(float, shape=(self.n, 3))
         vel = st.scratch("pos")
@@ -448,7 +464,7 @@ class FormationKernel(ModelKernel):
             dist = norms(pos[:, None, :] - pos[None, :, :])
             np.fill_diagonal(dist, np.inf)
             return float(dist.min())
-        return float(self.grid.gf[0])
+        return float(self.grid.view()[2].to_numpy()[0])  # either layout's cell side
 
     def _d_properties(self, p: np.ndarray, isolated: Isolated, min_dist: float
                       ) -> dict[str, float]:
@@ -458,7 +474,7 @@ class FormationKernel(ModelKernel):
         if self.graph is None:
             self.graph = MetricGraph(self.n, self.d, self.inclusive, False, self.dim)
         st = self.state
-        self.graph.union_edges(self.grid, st["pos"], st.ids)
+        self.graph.union_edges(self._hashed_order(), st["pos"], st.ids)
         flatten(self.graph.parent)  # each slot's component label: its root
         n_isolated = isolated.count()
         return {
@@ -468,6 +484,20 @@ class FormationKernel(ModelKernel):
             "isolated": float(n_isolated),
             "components": float(count_roots(self.graph.parent)),
         }
+
+    def _hashed_order(self) -> Grid:
+        """The d-grid's hashed layout with the state in its order (MetricGraph visits hashed
+        buckets only): a dense-sorted state is re-bucketed (observation steps of F2 only;
+        the caller has read every array that the move reorders)."""
+        g = self.grid
+        if g.layout == "hash":
+            return g.hashed
+        if g.hashed is None:  # PlaneGrid allocates its hashed grid when first needed
+            g.hashed = Grid(self.n, self.d, None, self.policy, self.dim)
+        g.hashed.build(self.state["pos"], self.now)
+        self.state.resort(g.hashed)
+        self.state.forget_sort()
+        return g.hashed
 
     def _d3(self, p: np.ndarray, tol: float) -> bool:
         """D3 from the agents off r^ (|r_i - r^| > tol), read in blocks: False at once when
