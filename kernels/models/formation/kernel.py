@@ -34,13 +34,14 @@ from ... import runtime
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
-from ...space.graph import MetricGraph, count_roots, flatten
+from ...space.graph import count_roots, flatten, reset_parent
 from ...space.grid import Grid, make_visitor, permute, permute_rows, row, within
 from ...space.initial import initial_state
 from ...space.integrate import count_nonfinite, gather_rows, rk4_begin, rk4_finish, rk4_stage
 from ...space.plane_grid import PlaneGrid, make_dense_visitor
 from ...space.state import SortedState
 from ...space.stream import PairwiseSum, Rows, RowSum, blocks
+from .components import union_kernel
 from .dense import bucket_aggregates, coarse_euler, max_count, stencil_reach
 from .forces import (
     F_KINDS,
@@ -205,7 +206,9 @@ class FormationKernel(ModelKernel):
         self.state = SortedState({"pos": init.positions})
         del init  # the host positions, before the other device arrays
         self.grid = PlaneGrid(n, d, policy, dim)
-        self.graph: MetricGraph | None = None
+        self.parent: ti.Ndarray | None = None  # F2's union-find forest, at observations
+        self.r2 = ti.ndarray(float, shape=1)  # d^2, for the graph's kernel
+        self.r2.from_numpy(as_real([d * d]))
         self.prm_host = force_params(p, d, dt, dim)
         self.prm = ti.ndarray(float, shape=self.prm_host.shape)
         # The offsets of the (at most two) stored formations in use: the second only when
@@ -471,40 +474,27 @@ class FormationKernel(ModelKernel):
         """D1-D3 of an F2 formation around r_0 = p(t)."""
         tol = isolated.tol
         collide = self.p.collision_distance or self.d / 100.0
-        if self.graph is None:
-            self.graph = MetricGraph(self.n, self.d, self.inclusive, False, self.dim)
-        st = self.state
-        self.graph.union_edges(self._hashed_order(), st["pos"], st.ids)
-        flatten(self.graph.parent)  # each slot's component label: its root
+        if self.parent is None:
+            self.parent = ti.ndarray(ti.i32, shape=self.n)
+        reset_parent(self.parent)
+        unite = union_kernel(self.inclusive, self.dim, self.grid.layout)
+        unite(self.state["pos"], self.parent, self.r2, *self.grid.view())
+        flatten(self.parent)  # each slot's component label: its root
         n_isolated = isolated.count()
         return {
             "D1": float(min_dist >= collide),
             "D2": float(n_isolated == 0),
             "D3": float(self._d3(p, tol)),
             "isolated": float(n_isolated),
-            "components": float(count_roots(self.graph.parent)),
+            "components": float(count_roots(self.parent)),
         }
-
-    def _hashed_order(self) -> Grid:
-        """The d-grid's hashed layout with the state in its order (MetricGraph visits hashed
-        buckets only): a dense-sorted state is re-bucketed (observation steps of F2 only;
-        the caller has read every array that the move reorders)."""
-        g = self.grid
-        if g.layout == "hash":
-            return g.hashed
-        if g.hashed is None:  # PlaneGrid allocates its hashed grid when first needed
-            g.hashed = Grid(self.n, self.d, None, self.policy, self.dim)
-        g.hashed.build(self.state["pos"], self.now)
-        self.state.resort(g.hashed)
-        self.state.forget_sort()
-        return g.hashed
 
     def _d3(self, p: np.ndarray, tol: float) -> bool:
         """D3 from the agents off r^ (|r_i - r^| > tol), read in blocks: False at once when
         a component has a single one (no line or plane through r^ has agents of it on both
         sides), else props.surrounds_2d / surrounds_3d_all on their labels and directions."""
         n = self.n
-        pos, parent = Rows(self.state["pos"]), Rows(self.graph.parent)
+        pos, parent = Rows(self.state["pos"]), Rows(self.parent)
         far_count = np.zeros(n, dtype=np.int32)
         for lo, hi in blocks(n):
             far = norms(pos.wide(lo, hi) - p) > tol
