@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import gc
 import io
 import os
 import subprocess
@@ -186,6 +187,12 @@ def ensure(requested: str, threads: int | None = None, precision: str = "float64
             raise RuntimeError("Taichi kernels must run on the thread that called ti.init")
         return _current
     if _current is not None:
+        # Taichi frees an array from its Python wrapper's __del__, by address, in the
+        # program current at that moment. A wrapper of this runtime collected after the
+        # reset would free whatever array of the next runtime then sits at that address
+        # ("invalid DeviceAllocation" on its next launch, seen in the test suite). Arrays
+        # held only by reference cycles are freed here, while their program exists.
+        gc.collect()
         ti.reset()
     arch = getattr(ti, backend)
     kwargs: dict = {

@@ -280,3 +280,29 @@ def test_a_float64_run_after_a_float32_one_of_the_same_kernel_is_float64(rule, L
     for k in ("polarization", "heading_spread"):
         assert np.allclose(fused.observables[k], per_step.observables[k], rtol=0,
                            atol=1e-11), k
+
+
+def test_switching_the_runtime_frees_the_old_ones_arrays_first():
+    """An array of one runtime that only a reference cycle holds is freed before the
+    reset: freed after it, its wrapper would delete the next runtime's array that sits
+    at the same address (Taichi frees by address in the current program)."""
+    import gc
+    import weakref
+
+    import taichi as ti
+
+    runtime.ensure("cpu", threads=2)
+    arr = ti.ndarray(ti.i32, shape=4)
+    holder: dict = {"arr": arr}
+    holder["self"] = holder  # a cycle: only the collector frees it
+    alive = weakref.ref(arr)
+    del arr, holder
+    was_enabled = gc.isenabled()
+    gc.disable()  # no automatic collection may do the runtime's work for it
+    try:
+        runtime.ensure("cpu", threads=1)
+        assert alive() is None
+    finally:
+        if was_enabled:
+            gc.enable()
+        runtime.ensure("cpu")
