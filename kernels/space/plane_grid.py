@@ -85,6 +85,7 @@ class DenseGrid:
         self.key = ti.ndarray(ti.i32, shape=n)
         self.perm = ti.ndarray(ti.i32, shape=n)
         self.cells = 0  # the cells `count` and `start` have room for
+        self.n_buckets = 0  # the cells of the last build (count and start may hold more)
         self.count: ti.Ndarray | None = None
         self.start: ti.Ndarray | None = None
         self.gf = ti.ndarray(float, shape=1 + dim)
@@ -108,6 +109,7 @@ class DenseGrid:
         if cells > self.max_cells:
             return False
         self._reserve(cells)
+        self.n_buckets = cells
         self.gf.from_numpy(runtime.as_real([self.cell, *bb[:d]]))
         self.gi.from_numpy(np.array(shape, dtype=np.int32))
         _assign(pos, self.key, self.count, self.gf, self.gi, d)
@@ -184,6 +186,11 @@ class PlaneGrid:
     @property
     def perm(self) -> ti.Ndarray:
         return self._current().perm
+
+    @property
+    def n_buckets(self) -> int:
+        """The buckets of the last build (a dense grid's cells; its arrays may hold more)."""
+        return self._current().n_buckets
 
     def view(self) -> tuple:
         return self._current().view()

@@ -287,7 +287,7 @@ class FormationKernel(ModelKernel):
         self.state.sort(self.grid, step)
         if self.cap is None:
             return 1
-        densest = max_count(self.grid.view()[0], self._cells())
+        densest = max_count(self.grid.view()[0], self.grid.n_buckets)
         if 9 * densest <= self.cap:
             return 1
         m = stencil_reach(densest)
@@ -303,14 +303,6 @@ class FormationKernel(ModelKernel):
         start, cid, _, _ = fine.view()
         bucket_aggregates(self.state["pos"], start, cid, *self.agg)
         return m
-
-    def _cells(self) -> int:
-        """The cells (buckets) of the d-grid as last built: a dense grid's start array has
-        room for more."""
-        g = self.grid
-        if g.layout == "dense":
-            return int(np.prod(g.view()[3].to_numpy()))
-        return g.hashed.n_buckets
 
     def step(self, step: int) -> None:
         st = self.state
