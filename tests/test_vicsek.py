@@ -195,17 +195,27 @@ def test_graph_observables_match_brute_force(path, L):
     assert obs["isolated"] == np.count_nonzero(deg == 0)
 
 
-@pytest.mark.parametrize("spread", [0.0, 1e-6, 0.5, 3.0, 6.2])
-def test_bucketed_circular_spread_equals_the_sorted_one(taichi_cpu, spread):
+@pytest.mark.parametrize("n", [1000, 40_000])
+@pytest.mark.parametrize("spread", [0.0, 1e-6, 0.5, 3.0, 6.2, "even", "full"])
+def test_bucketed_circular_spread_equals_the_sorted_one(taichi_cpu, spread, n):
+    # N/8 buckets first, N when their largest gap is under a bucket: "even" (equal gaps
+    # of 2 pi / N: the first pass cannot tell) and "full" (uniform on the circle: at
+    # N = 1000 the largest gap is under a bucket of N/8, at 40000 over it) take both paths.
     import taichi as ti
 
     from flocklab.kernels.models.vicsek.kernel import VicsekKernel
     from flocklab.kernels.space.observables import circular_spread
 
-    k = VicsekKernel(scenario(N=1000), taichi_cpu.policy)
-    gen = np.random.default_rng(int(spread * 10))
-    theta = gen.uniform(2.0, 2.0 + spread, size=1000) + 2 * np.pi * gen.integers(-3, 3, 1000)
-    arr = ti.ndarray(ti.f64, shape=(1000, 2))
+    k = VicsekKernel(scenario(N=n), taichi_cpu.policy)
+    gen = np.random.default_rng(n + (7 if isinstance(spread, str) else int(spread * 10)))
+    if spread == "even":
+        theta = 2 * np.pi * np.arange(n) / n + 0.1
+    elif spread == "full":
+        theta = gen.uniform(-np.pi, np.pi, size=n)
+    else:
+        theta = gen.uniform(2.0, 2.0 + spread, size=n) + 2 * np.pi * gen.integers(-3, 3, n)
+    arr = ti.ndarray(ti.f64, shape=(n, 2))
     arr.from_numpy(np.stack([np.cos(theta), np.sin(theta)], axis=1))
     assert k.circular_spread(arr) == pytest.approx(circular_spread(theta), abs=1e-12)
-    assert circular_spread(theta) == pytest.approx(spread, abs=2e-2)
+    if not isinstance(spread, str):  # the draws span the arc they were drawn from
+        assert spread - 5e-2 <= circular_spread(theta) <= spread + 1e-12

@@ -354,9 +354,9 @@ class Grid:
         self.radius = float(radius)
         self.periodic = periodic_L is not None
         self.serial = policy.serial_scatter
-        # The box uses cells of r/2 and a 5x5 stencil: its rows are contiguous, and it reads
-        # about 30 % fewer candidates than r-cells with a 3x3 stencil. The plane's hashed
-        # buckets are not contiguous, so there fewer, larger cells win.
+        # Cells of side r (a hair more) and the 3x3 (3x3x3) block. Trimming each row to the
+        # cells within reach of the agent (a tenth fewer candidates in 2D, a quarter in 3D)
+        # measured no faster for Vicsek at 10^6 (slower in 2D), so the visit reads the block.
         self.reach = PERIODIC_REACH if self.periodic else 1
         cell = self.radius * widen() / self.reach
         if self.periodic:

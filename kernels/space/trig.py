@@ -7,12 +7,12 @@ any argument); here one reduction by pi/2 (Cody-Waite, two constants: off by und
 one ulp on |r| <= pi/4), and the quadrant picks the signs. The results agree with libm's
 to one ulp, and within 2^-60 absolute near the zeros of cos and sin, where one ulp of a
 value near 0 would need a third part of pi/2 (tests/test_trig.py checks 10^6 angles): a
-unit vector rotated by them is exact to a rounding. float32 runs keep libm's cosf/sinf.
+unit vector rotated by them is exact to a rounding. float32 runs compute the same in
+float64 and round each result once: cos and sin correctly rounded to float32 but for the
+rare value within 2^-29 ulp of a rounding boundary.
 """
 
 import taichi as ti
-
-from .. import runtime
 
 # fdlibm k_sin.c / k_cos.c coefficients (Sun Microsystems, 1993: "permission to use,
 # copy, modify, and distribute this software is freely granted").
@@ -27,28 +27,25 @@ INV_PIO2 = 6.36619772367581382433e-01
 
 @ti.func
 def cos_sin(x):
-    """(cos x, sin x) for |x| <= pi."""
-    c = 0.0
-    s = 0.0
-    if ti.static(runtime.current().precision == "float32"):
-        c = ti.cos(x)
-        s = ti.sin(x)
-    else:
-        k = ti.round(x * INV_PIO2)
-        r = (x - k * PIO2_1) - k * PIO2_1T  # |r| <= pi/4 (and a hair)
-        z = r * r
-        sr = r + z * r * (S1 + z * (S2 + z * (S3 + z * (S4 + z * (S5 + z * S6)))))
-        hz = 0.5 * z
-        w = 1.0 - hz
-        cr = w + (((1.0 - w) - hz)
-                  + z * z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6))))))
-        q = ti.cast(k, ti.i32) & 3  # the quadrant: rotate (cr, sr) by q * pi/2
-        c = cr
-        s = sr
-        if q == 1:
-            c, s = -sr, cr
-        elif q == 2:
-            c, s = -cr, -sr
-        elif q == 3:
-            c, s = sr, -cr
-    return ti.math.vec2(c, s)
+    """(cos x, sin x) for |x| <= pi, in the kernels' float type. A float32 run evaluates
+    the same float64 polynomials and rounds once (libm's cosf and sinf, two calls with
+    their own range reductions, were a quarter of a float32 step at N = 10^6)."""
+    x64 = ti.cast(x, ti.f64)
+    k = ti.round(x64 * ti.f64(INV_PIO2))
+    r = (x64 - k * ti.f64(PIO2_1)) - k * ti.f64(PIO2_1T)  # |r| <= pi/4 (and a hair)
+    z = r * r
+    sr = r + z * r * (ti.f64(S1) + z * (ti.f64(S2) + z * (ti.f64(S3) + z * (
+        ti.f64(S4) + z * (ti.f64(S5) + z * ti.f64(S6))))))
+    hz = ti.f64(0.5) * z
+    w = ti.f64(1.0) - hz
+    cr = w + (((ti.f64(1.0) - w) - hz) + z * z * (ti.f64(C1) + z * (ti.f64(C2) + z * (
+        ti.f64(C3) + z * (ti.f64(C4) + z * (ti.f64(C5) + z * ti.f64(C6)))))))
+    # The quadrant q rotates (cr, sr) by q pi/2: selects, not branches (q is as random as
+    # the noise, and a mispredicted branch per agent cost a third of this function).
+    q = ti.cast(k, ti.i32)
+    odd = (q & 1) != 0
+    c = ti.select(odd, sr, cr)
+    s = ti.select(odd, cr, sr)
+    c = ti.select(((q + 1) & 2) != 0, -c, c)  # q = 1, 2: cos < 0
+    s = ti.select((q & 2) != 0, -s, s)  # q = 2, 3: sin < 0
+    return ti.math.vec2(ti.cast(c, float), ti.cast(s, float))
