@@ -154,7 +154,9 @@ def test_an_unreachable_cluster_is_a_clear_error_naming_the_address(tmp_path: Pa
 
 def test_the_second_node_killed_its_tasks_rerun_on_the_head(ray_cluster: LocalRayCluster,
                                                            tmp_path: Path):
-    doc = sweep_doc(steps=2000, n=400, etas=(0.5, 1.0, 2.0, 4.0), replicas=2)
+    # Long enough runs that the second node is seen running one: with 2000 steps a
+    # full-suite run's sweep finished before the poll saw any there.
+    doc = sweep_doc(steps=10_000, n=400, etas=(0.5, 1.0, 2.0, 4.0), replicas=2)
     spec, out = write(tmp_path, doc), tmp_path / "out"
     proc = subprocess.Popen(sweep_cmd(spec, out, ray_cluster.address),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
