@@ -196,11 +196,13 @@ def test_graph_observables_match_brute_force(path, L):
 
 
 @pytest.mark.parametrize("n", [1000, 40_000])
-@pytest.mark.parametrize("spread", [0.0, 1e-6, 0.5, 3.0, 6.2, "even", "full"])
+@pytest.mark.parametrize("spread", [0.0, 1e-6, 0.5, 3.0, 6.2, "even", "full", "hole"])
 def test_bucketed_circular_spread_equals_the_sorted_one(taichi_cpu, spread, n):
     # N/8 buckets first, N when their largest gap is under a bucket: "even" (equal gaps
     # of 2 pi / N: the first pass cannot tell) and "full" (uniform on the circle: at
-    # N = 1000 the largest gap is under a bucket of N/8, at 40000 over it) take both paths.
+    # N = 1000 the largest gap is under a bucket of N/8, at 40000 over it) take both paths;
+    # "hole" hides the largest gap inside one N/8 bucket (7/8 of it wide, every gap
+    # between buckets 1/8): a first pass trusted too readily answers the small gap.
     import taichi as ti
 
     from flocklab.kernels.models.vicsek.kernel import VicsekKernel
@@ -208,8 +210,11 @@ def test_bucketed_circular_spread_equals_the_sorted_one(taichi_cpu, spread, n):
 
     k = VicsekKernel(scenario(N=n), taichi_cpu.policy)
     gen = np.random.default_rng(n + (7 if isinstance(spread, str) else int(spread * 10)))
-    if spread == "even":
-        theta = 2 * np.pi * np.arange(n) / n + 0.1
+    if spread in ("even", "hole"):
+        idx = np.arange(n)
+        if spread == "hole":  # bucket 10 keeps its first and last; the rest repeat others
+            idx[81:87] = idx[:6]
+        theta = 2 * np.pi * (idx + 0.1) / n  # clear of the bucket edges
     elif spread == "full":
         theta = gen.uniform(-np.pi, np.pi, size=n)
     else:

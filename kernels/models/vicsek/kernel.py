@@ -91,6 +91,10 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
     also fills the graph observables of G(t) from the same neighbour visit: each agent's
     degree, and the union of every edge into `parent` (slot-indexed) for the components."""
 
+    # The sums' last lane counts the closed neighbourhood: the JLM rules average over it,
+    # the vicsek rule needs it only for the degrees.
+    counted = rule != RULES["vicsek"] or with_graph
+
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):
         ew, theta, prm, parent = ti.static(S[0], S[1], S[2], S[3])
@@ -113,9 +117,6 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
         return acc
 
     visit = make_visitor(pair, dim=dim)
-    # The sums' last lane counts the closed neighbourhood: the JLM rules average over it,
-    # the vicsek rule needs it only for the degrees.
-    counted = rule != RULES["vicsek"] or with_graph
 
     @ti.kernel
     def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, ew_out: nd,
