@@ -30,7 +30,7 @@ def adjacency(pos: np.ndarray, r: float, L: float | None, inclusive: bool) -> np
 
 def vicsek_step(pos, theta, *, rule, r, L, inclusive, v0dt, eta=0.0, g=None, theta0=0.0,
                 noise=None, move_new=False):
-    """One synchronous M1 step for every rule (the equations: kernels/models/vicsek/kernel.py)."""
+    """One synchronous M1 step for every rule (the equations: kernels/models/vicsek/step.py)."""
     a = adjacency(pos, r, L, inclusive)
     closed = a | np.eye(len(pos), dtype=bool)
     cnt = closed.sum(axis=1)

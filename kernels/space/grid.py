@@ -24,6 +24,7 @@ count), the 3x3 block would meet a cell twice: the visit then reads every cell o
 takes each agent's minimum image, so any radius is right, r > L/2 and past the
 half-diagonal included (one image per pair). It is a branch per agent on the cell count,
 not per pair: the common case's loops are the same code as before.
+kernels/space/blocks.py visits the same cells for the agents of one cell together.
 
 Cells are a hair wider than the radius (`widen()`), so rounding in floor() can never
 place two agents within the radius two cells apart. The rounding of a cell coordinate is
@@ -373,6 +374,8 @@ class Grid:
             self.nc = 0
             n_buckets = _next_pow2(2 * n)
         self.n_buckets = n_buckets
+        # blocks.make_block_visitor's case: a cell's 3x3 (3x3x3) block all distinct.
+        self.blocks = self.periodic and self.nc >= 2 * self.reach + 1
         # gf: cell width, L, then the origin of unbounded space's cells (dim coordinates).
         self.gf = np.array([cell, L] + [0.0] * dim, dtype=runtime.real())
         self.gi = np.array([self.nc, n_buckets - 1], dtype=np.int32)
@@ -422,21 +425,23 @@ class Grid:
 
 
 @ti.func
-def _image(pos: ti.template(), k, xi, s, first: ti.template()):
-    """d = pos[k] + s - xi per component, the shift s skipped below component `first`
-    (the same additions, in the same order, as the 2D-only code wrote out)."""
-    p = row(pos, k, xi.n)
-    d = ti.Vector.zero(float, xi.n)
-    for a in ti.static(range(xi.n)):
-        if ti.static(a < first):
-            d[a] = p[a] - xi[a]
-        else:
-            d[a] = p[a] + s[a] - xi[a]
-    return d
+def shifted(pos: ti.template(), k, s, first: ti.template()):
+    """pos[k] + s per component, the shift s skipped below component `first`."""
+    p = row(pos, k, s.n)
+    for a in ti.static(range(first, s.n)):
+        p[a] = p[a] + s[a]
+    return p
 
 
 @ti.func
-def _wrap(b, nc, L):
+def _image(pos: ti.template(), k, xi, s, first: ti.template()):
+    """d = pos[k] + s - xi per component, the shift s skipped below component `first`
+    (the same additions, in the same order, as the 2D-only code wrote out)."""
+    return shifted(pos, k, s, first) - xi
+
+
+@ti.func
+def wrap_cell(b, nc, L):
     """Cell coordinate b folded into [0, nc), and the shift (0 or +-L) that makes the
     folded cell's agents the images nearest to a point of the unfolded cell."""
     shift = 0.0
@@ -482,12 +487,12 @@ def make_visitor(pair, half: bool = False, dim: int = 2):
                     s = ti.Vector.zero(float, dim)
                     layer = 0
                     if ti.static(dim == 3):
-                        bz, sz = _wrap(c[2] + e, nc, L)
+                        bz, sz = wrap_cell(c[2] + e, nc, L)
                         s[2] = sz
                         layer = nc * nc * bz
                     own_layer = ti.static(half and e == 0)
                     for b in range(ti.static(0 if own_layer else -R), R + 1):
-                        by, sy = _wrap(c[1] + b, nc, L)
+                        by, sy = wrap_cell(c[1] + b, nc, L)
                         s[1] = sy
                         row0 = nc * by + layer
                         a0 = -R
@@ -503,7 +508,7 @@ def make_visitor(pair, half: bool = False, dim: int = 2):
                                 acc = pair(i, k, _image(pos, k, xi, s, 1), acc, S)
                         else:
                             for a in range(a0, R + 1):
-                                bx, sx = _wrap(c[0] + a, nc, L)
+                                bx, sx = wrap_cell(c[0] + a, nc, L)
                                 s[0] = sx
                                 k0 = start[row0 + bx]
                                 if ti.static(own_layer):

@@ -17,12 +17,24 @@ A non-finite result increments bad[0]; the caller raises SimulationDiverged.
 M2's kernels take the dimension `dim` (2 or 3) at compile time: the law needs only
 |r_ij| and the vectors r_ij, v_ij, so one source serves both (2D arithmetic unchanged).
 M3's navigation and adaptive radius take `dim` too.
+On the dense grid the metric kernels go by cell blocks (kernels/space/blocks.py: up to four
+agents of a cell share one pass over their neighbour cells), bit for bit the per-agent
+visit's sums.
 """
 
 from functools import cache
 
 import taichi as ti
 
+from ...space.blocks import (
+    BLOCK_LANES,
+    cell_of,
+    lane,
+    lanes,
+    load_block,
+    make_block_visitor,
+    n_cells,
+)
 from ...space.graph import find, link
 from ...space.grid import make_visitor, row, within
 from ...space.params import Slots
@@ -93,9 +105,12 @@ def visitor(pair, search: str, dim: int = 2):
 
 @cache
 def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
-                 has_obstacles: bool, unit_kappa: bool, search: str, dim: int = 2):
+                 has_obstacles: bool, unit_kappa: bool, search: str, dim: int = 2,
+                 blocks: bool = True):
     """(euler, accel) kernels over metric neighbours (`search`: all_pairs, hash, dense),
-    specialised at compile time."""
+    specialised at compile time. On the dense grid they go by cell blocks unless `blocks`
+    is False (the per-agent visit: the same bits, which tests/test_flocking_by_cell.py
+    checks)."""
     navigation = make_navigation(has_obstacles, unit_kappa, dim)
 
     @ti.func
@@ -118,10 +133,8 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
     visit = visitor(pair, search, dim)
 
     @ti.func
-    def control(i, xi, vi, pos: ti.template(), vel: ti.template(), rad: ti.template(),
-                prm: ti.template(), nav: ti.template(), G: ti.template(), OB: ti.template()):
-        sums = visit(i, xi, ti.Vector.zero(float, dim + 1), pos, G,
-                     ti.static((vel, rad, prm)), False)
+    def control(i, xi, vi, sums, prm: ti.template(), nav: ti.template(), OB: ti.template()):
+        """u_i from agent i's neighbour sums (sum v_j + sum f d, |N_i|)."""
         acc = ti.Vector.zero(float, dim)
         for c in ti.static(range(dim)):
             acc[c] = sums[c]
@@ -142,34 +155,107 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
                     acc -= prm[P.CD] * vi
         return acc
 
+    @ti.func
+    def euler_update(i, xi, vi, sums, pos_out: ti.template(), vel_out: ti.template(),
+                     prm: ti.template(), nav: ti.template(), bad: ti.template(),
+                     OB: ti.template()):
+        v = vi + prm[P.DT] * control(i, xi, vi, sums, prm, nav, OB)
+        x = xi + prm[P.DT] * v
+        put(pos_out, i, x)
+        put(vel_out, i, v)
+        if nonfinite(x, v):
+            ti.atomic_add(bad[0], 1)
+
+    @ti.func
+    def accel_update(i, xi, vi, sums, acc_out: ti.template(), prm: ti.template(),
+                     nav: ti.template(), bad: ti.template(), OB: ti.template()):
+        u = control(i, xi, vi, sums, prm, nav, OB)
+        put(acc_out, i, u)
+        if nonfinite(u, xi):
+            ti.atomic_add(bad[0], 1)
+
+    if search == "dense" and blocks:
+        # By cell blocks (kernels/space/blocks.py): every agent's sums in the per-agent
+        # visit's order, so the same bits, with one pass over the rows per block.
+        visit_block = make_block_visitor(lanes(pair), dim, "dense")
+
+        @ti.func
+        def block_sums(i0, m, c, pos: ti.template(), vel: ti.template(), rad: ti.template(),
+                       prm: ti.template(), G: ti.template()):
+            Iv, X = load_block(pos, i0, m, dim)
+            sums = ti.Matrix.zero(float, BLOCK_LANES, dim + 1)
+            visit_block(c, Iv, X, sums, pos, G, ti.static((vel, rad, prm)))
+            return Iv, X, sums
+
+        @ti.kernel
+        def euler(pos: nd, vel: nd, rad: nd, pos_out: nd, vel_out: nd, prm: nd, nav: nd,
+                  bad: nd, start: nd, cid: nd, gf: nd, gi: nd,
+                  opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
+            G = ti.static((start, cid, gf, gi))
+            OB = ti.static((opos, orad, ostart, ocid, ogf, ogi))
+            for bucket in range(n_cells(G, "dense", dim)):
+                c = cell_of(bucket, G, "dense", dim)
+                i0 = start[bucket]
+                while i0 < start[bucket + 1]:
+                    m = ti.min(start[bucket + 1] - i0, BLOCK_LANES)
+                    Iv, X, sums = block_sums(i0, m, c, pos, vel, rad, prm, G)
+                    for q in ti.static(range(BLOCK_LANES)):
+                        if q < m:
+                            i = Iv[q]
+                            euler_update(i, lane(X, q), row(vel, i, dim), lane(sums, q),
+                                         pos_out, vel_out, prm, nav, bad, OB)
+                    i0 += BLOCK_LANES
+
+        @ti.kernel
+        def accel(pos: nd, vel: nd, rad: nd, acc_out: nd, prm: nd, nav: nd, bad: nd,
+                  start: nd, cid: nd, gf: nd, gi: nd,
+                  opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
+            G = ti.static((start, cid, gf, gi))
+            OB = ti.static((opos, orad, ostart, ocid, ogf, ogi))
+            for bucket in range(n_cells(G, "dense", dim)):
+                c = cell_of(bucket, G, "dense", dim)
+                i0 = start[bucket]
+                while i0 < start[bucket + 1]:
+                    m = ti.min(start[bucket + 1] - i0, BLOCK_LANES)
+                    Iv, X, sums = block_sums(i0, m, c, pos, vel, rad, prm, G)
+                    for q in ti.static(range(BLOCK_LANES)):
+                        if q < m:
+                            i = Iv[q]
+                            accel_update(i, lane(X, q), row(vel, i, dim), lane(sums, q),
+                                         acc_out, prm, nav, bad, OB)
+                    i0 += BLOCK_LANES
+
+        return euler, accel
+
+    @ti.func
+    def agent_sums(i, xi, pos: ti.template(), vel: ti.template(), rad: ti.template(),
+                   prm: ti.template(), G: ti.template()):
+        return visit(i, xi, ti.Vector.zero(float, dim + 1), pos, G,
+                     ti.static((vel, rad, prm)), False)
+
     @ti.kernel
     def euler(pos: nd, vel: nd, rad: nd, pos_out: nd, vel_out: nd, prm: nd, nav: nd, bad: nd,
               start: nd, cid: nd, gf: nd, gi: nd,
               opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
+        G = ti.static((start, cid, gf, gi))
+        OB = ti.static((opos, orad, ostart, ocid, ogf, ogi))
         for i in range(pos.shape[0]):
             xi = row(pos, i, dim)
             vi = row(vel, i, dim)
-            u = control(i, xi, vi, pos, vel, rad, prm, nav, ti.static((start, cid, gf, gi)),
-                        ti.static((opos, orad, ostart, ocid, ogf, ogi)))
-            v = vi + prm[P.DT] * u
-            x = xi + prm[P.DT] * v
-            put(pos_out, i, x)
-            put(vel_out, i, v)
-            if nonfinite(x, v):
-                ti.atomic_add(bad[0], 1)
+            euler_update(i, xi, vi, agent_sums(i, xi, pos, vel, rad, prm, G), pos_out,
+                         vel_out, prm, nav, bad, OB)
 
     @ti.kernel
     def accel(pos: nd, vel: nd, rad: nd, acc_out: nd, prm: nd, nav: nd, bad: nd,
               start: nd, cid: nd, gf: nd, gi: nd,
               opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
+        G = ti.static((start, cid, gf, gi))
+        OB = ti.static((opos, orad, ostart, ocid, ogf, ogi))
         for i in range(pos.shape[0]):
             xi = row(pos, i, dim)
             vi = row(vel, i, dim)
-            u = control(i, xi, vi, pos, vel, rad, prm, nav, ti.static((start, cid, gf, gi)),
-                        ti.static((opos, orad, ostart, ocid, ogf, ogi)))
-            put(acc_out, i, u)
-            if nonfinite(u, xi):
-                ti.atomic_add(bad[0], 1)
+            accel_update(i, xi, vi, agent_sums(i, xi, pos, vel, rad, prm, G), acc_out, prm,
+                         nav, bad, OB)
 
     return euler, accel
 

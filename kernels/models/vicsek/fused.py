@@ -1,6 +1,6 @@
 """M1 on the small-N path: many steps of many replicas in one kernel launch.
 
-The rule is the one `kernels/models/vicsek/kernel.py` documents (paper 001, eq. 1-2, 17-18,
+The rule is the one `kernels/models/vicsek/step.py` documents (paper 001, eq. 1-2, 17-18,
 22; Vicsek et al. 1995); only the schedule differs. At small N a step costs microseconds of
 arithmetic but milliseconds of launches and host round trips, so here one launch advances every
 replica of a batch through a whole window of steps: replicas run in parallel (one per
@@ -39,9 +39,9 @@ from ...space.graph import union_serial
 from ...space.grid import max_cells_across, widen
 from ...space.params import Slots
 from .noise import cap_turn
+from .step import RULES
 
 nd = ti.types.ndarray()
-RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
 ALL_PAIRS_N = 48  # at or below this N every pair is tested (fewer operations than cells)
 TWO_PI = 2 * np.pi
 

@@ -1,25 +1,12 @@
 """M1 kernel: Vicsek and the Jadbabaie–Lin–Morse heading rules (paper 001).
 
-One step, synchronous for all agents (state at t read, state at t+1 written elsewhere):
-  S_i = sums over the closed neighbourhood N_i ∪ {i}, N_i = {j : |r_ij| <= r} (eq. 2 text)
-  vicsek    theta_i' = atan2(sum sin theta_j, sum cos theta_j) + xi_i; held as the unit
-            vector e(theta_i') = R(xi_i) s / |s|, s = sum e(theta_j): no atan2 per step
-            (theta = atan2(e) when a heading is asked for, in (-pi, pi])
-  average   theta_i' = sum theta_j / (1 + n_i)                       (eq. 1-2, F = (I+D)^-1 (A+I))
-  laplacian theta_i' = theta_i - ((1 + n_i) theta_i - sum theta_j) / g   (eq. 17-18)
-  leader    as average, with agent 0 (the leader) in the sums whenever within r and its
-            own heading held at theta_0 (eq. 22: its b_i theta_0 term)
-  x_i' = x_i + v0 dt (cos phi_i, sin phi_i), phi = theta (old, default) or theta'.
-xi_i = eta (u - 1/2), u from the counter-based hash of (seed, step, agent id).
-
-3D (rule vicsek only, the same source with dim = 3): e_i' = the mean direction s / |s|
-turned to a direction uniform in the spherical cap of half-angle eta/2 around it: polar
-angle t with cos t uniform in [cos(eta/2), 1] (uniform in area), azimuth uniform in
-[0, 2 pi), two counter-based draws (streams 0 and 1). docs/MODELS_3D.md relates it to the
-2D rule and to the vectorial noise of the literature.
+The state (positions and unit headings e_i, the JLM rules' angles theta_i, in grid order),
+its step and its observables. The update rules and their Taichi kernels are in step.py
+(the per-agent visit, and the rule vicsek in the periodic box by cell blocks, bit for bit
+the same); the 3D noise in noise.py (docs/MODELS_3D.md); the small-N batch in fused.py.
+Headings are reported as theta = atan2(e) in (-pi, pi]; in 3D as the unit vectors.
 """
 
-from functools import cache
 from typing import Any
 
 import numpy as np
@@ -30,20 +17,15 @@ from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
-from ...space import rng, trig
-from ...space.graph import MetricGraph, count_roots, find, link, reset_parent
-from ...space.grid import Grid, make_visitor, row, set_row, within
+from ...space import rng
+from ...space.graph import MetricGraph, count_roots, reset_parent
+from ...space.grid import Grid, row
 from ...space.initial import initial_state
-from ...space.params import Slots
 from ...space.state import SortedState
 from .fused import VicsekBatch
-from .noise import cap_turn
+from .step import RULES, P, block_step_kernel, step_kernel
 
 nd = ti.types.ndarray()
-RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
-# The parameter array: r^2, v0 dt, eta, g (laplacian), L (periodic box), theta_0 (leader),
-# and 1 - cos(eta/2) (3D: the spherical cap's height).
-P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0", "CAP")
 _TWO_PI = 2 * np.pi
 
 
@@ -82,116 +64,6 @@ def _largest_gap(lo: nd, hi: nd, nb: ti.i32) -> float:
                 first = lo[b]
             last = hi[b]
     return ti.max(gap, first + _TWO_PI - last)
-
-
-@cache
-def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with_graph: bool,
-                dim: int = 2):
-    """Compile-time specialised step for one rule, geometry and dimension. `with_graph`
-    also fills the graph observables of G(t) from the same neighbour visit: each agent's
-    degree, and the union of every edge into `parent` (slot-indexed) for the components."""
-
-    # The sums' last lane counts the closed neighbourhood: the JLM rules average over it,
-    # the vicsek rule needs it only for the degrees.
-    counted = rule != RULES["vicsek"] or with_graph
-
-    @ti.func
-    def pair(i, k, d, acc, S: ti.template()):
-        ew, theta, prm, parent = ti.static(S[0], S[1], S[2], S[3])
-        # Branch-free accumulation: w is 1 for a neighbour, 0 otherwise.
-        w = ti.cast(within(d.dot(d), prm[P.R2], inclusive), float)
-        if ti.static(rule == RULES["vicsek"]):
-            ek = row(ew, k, dim)
-            if ti.static(counted):
-                acc += w * ti.Vector([ek[c] for c in ti.static(range(dim))] + [1.0])
-            else:  # the count is for the degrees only: one add a pair fewer without them
-                acc += w * ek
-        else:
-            acc += w * ti.math.vec3(theta[k], 0.0, 1.0)
-        if ti.static(with_graph):
-            if w > 0.0 and k > i:
-                ri = find(parent, i)
-                rk = find(parent, k)
-                if ri != rk:
-                    link(parent, ri, rk)
-        return acc
-
-    visit = make_visitor(pair, dim=dim)
-
-    @ti.kernel
-    def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, ew_out: nd,
-             prm: nd, key: ti.u32, key2: ti.u32, bad: nd, parent: nd, deg: nd,
-             start: nd, cid: nd, gf: nd, gi: nd):
-        for i in range(pos.shape[0]):
-            xi = row(pos, i, dim)
-            acc = visit(i, xi, ti.Vector.zero(float, dim + int(counted)), pos,
-                        ti.static((start, cid, gf, gi)),
-                        ti.static((ew, theta, prm, parent)), periodic)
-            if ti.static(with_graph):
-                deg[i] = ti.cast(acc[dim], ti.i32) - 1  # the closed neighbourhood holds i
-            th = 0.0
-            if ti.static(rule != RULES["vicsek"]):
-                th = theta[i]
-            new = th
-            e_new = ti.Vector.unit(dim, 0, float)
-            if ti.static(rule == RULES["vicsek"]):
-                nrm2 = acc[0] * acc[0] + acc[1] * acc[1]
-                if ti.static(dim == 3):
-                    nrm2 += acc[2] * acc[2]
-                nrm = ti.sqrt(nrm2)
-                if nrm > 0.0:  # arg(0) = 0, as atan2(0, 0); in 3D the x axis
-                    for c in ti.static(range(dim)):
-                        e_new[c] = acc[c] / nrm
-            elif ti.static(rule == RULES["laplacian"]):
-                new = th - (acc[2] * th - acc[0]) / prm[P.G]
-            else:
-                new = acc[0] / acc[2]
-            if ti.static(dim == 3):
-                if prm[P.ETA] > 0.0:
-                    e_new = cap_turn(e_new, rng.uniform(key, ids[i]),
-                                     rng.uniform(key2, ids[i]), prm[P.CAP])
-            elif prm[P.ETA] > 0.0:
-                noise = prm[P.ETA] * (rng.uniform(key, ids[i]) - 0.5)
-                if ti.static(rule == RULES["vicsek"]):
-                    cs = trig.cos_sin(noise)  # rotate e_new by the noise angle
-                    cx = cs[0]
-                    sx = cs[1]
-                    ex = e_new[0]
-                    ey = e_new[1]
-                    e_new = ti.math.vec2(cx * ex - sx * ey, sx * ex + cx * ey)
-                else:
-                    new += noise
-            if ti.static(rule == RULES["leader"]):
-                if ids[i] == 0:
-                    new = prm[P.THETA0]
-            if ti.static(rule != RULES["vicsek"]):
-                e_new = ti.math.vec2(ti.cos(new), ti.sin(new))
-            e = row(ew, i, dim)  # e(theta_i(t))
-            if ti.static(move_new):
-                e = e_new
-            x = xi + prm[P.V0DT] * e
-            if ti.static(periodic):
-                L = prm[P.L]
-                # x - L floor(x / L) is x itself for x in [0, L) (x / L < 1 there, in
-                # rounding too): the division only for an agent that crossed the box.
-                for c in ti.static(range(dim)):
-                    if x[c] < 0.0 or x[c] >= L:
-                        x[c] -= L * ti.floor(x[c] / L)
-                        if x[c] >= L:  # x - L floor(x / L) can round up to L itself
-                            x[c] -= L
-            set_row(pos_out, i, x)
-            if ti.static(rule != RULES["vicsek"]):
-                theta_out[i] = new
-            # The unit vectors travel with the state: each heading's cos and sin (2D) are
-            # computed once, here.
-            set_row(ew_out, i, e_new)
-            v = new + x[0] + x[1] + e_new[0]  # NaN if any term is NaN or infinite
-            if ti.static(dim == 3):
-                v += x[2] + e_new[1] + e_new[2]
-            if ti.math.isnan(v) or ti.math.isinf(v):
-                ti.atomic_add(bad[0], 1)
-
-    return step
 
 
 @register_kernel
@@ -238,6 +110,9 @@ class VicsekKernel(ModelKernel):
         variant = (RULES[p.rule], scenario.inclusive, self.periodic,
                    p.position_update == "new_heading")
         self.kernel = step_kernel(*variant, False, dim)
+        if p.rule == "vicsek" and self.grid.blocks:  # the same bits, by cell
+            self.kernel = block_step_kernel(scenario.inclusive,
+                                            p.position_update == "new_heading", dim)
         self.kernel_with_graph = step_kernel(*variant, True, dim)
         track = p.track_linked_intervals
         self.track = n <= 100_000 if track is None else track
