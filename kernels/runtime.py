@@ -44,11 +44,15 @@ class DevicePolicy:
     starts and permutation."""
     dense_grid: bool
     """Whether the plane may use the dense row-by-row grid (its scan is serial: a CPU's)."""
+    cell_blocks: bool = True
+    """Whether Vicsek's step in the box goes by cell blocks (kernels/space/blocks.py: a
+    thread per cell, its agents four at a time: a CPU's vector unit) or keeps a thread per
+    agent (a GPU's: cells of unequal counts would stall a warp). The same bits either way."""
 
     @staticmethod
     def for_backend(backend: str) -> DevicePolicy:
         cpu = backend == "cpu"
-        return DevicePolicy(serial_scatter=cpu, dense_grid=cpu)
+        return DevicePolicy(serial_scatter=cpu, dense_grid=cpu, cell_blocks=cpu)
 
 
 @dataclass(frozen=True)

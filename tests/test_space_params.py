@@ -35,4 +35,5 @@ def test_device_policy_per_backend():
     assert DevicePolicy.for_backend("cpu") == DevicePolicy(serial_scatter=True, dense_grid=True)
     for gpu in ("cuda", "vulkan"):
         assert DevicePolicy.for_backend(gpu) == DevicePolicy(serial_scatter=False,
-                                                             dense_grid=False)
+                                                             dense_grid=False,
+                                                             cell_blocks=False)

@@ -15,6 +15,7 @@ import pytest
 from flocklab import kernels
 from flocklab.kernels.model import kernel_for
 from flocklab.kernels.models.vicsek.step import RULES, block_step_kernel, step_kernel
+from flocklab.kernels.runtime import DevicePolicy
 from flocklab.kernels.space import rng
 from flocklab.schemas import Scenario
 from tests.test_vicsek import Frames
@@ -138,3 +139,29 @@ def test_observing_every_step_leaves_the_trajectory_unchanged(dim, monkeypatch):
     for a, b in zip(*finals, strict=True):
         np.testing.assert_array_equal(a, b)
     assert not np.array_equal(finals[0][0], sink.pos[0])  # the agents moved
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_gpu_policy_steps_per_agent_to_the_same_bits(dim):
+    """A GPU keeps a thread per agent (DevicePolicy.cell_blocks False), built here on the
+    CPU with the GPU's policy (its parallel scatter too): the trajectory's bits are the
+    CPU policy's."""
+    sc = Scenario.model_validate({
+        "model": {"kind": "vicsek", "v0": 0.3, "eta": 1.0},
+        "space": {"kind": "periodic", "L": 7.0, "dimension": dim},
+        "neighbours": {"radius": 1.0},
+        "initial": {"kind": "random", "N": 3000},
+        "time": {"steps": 10, "dt": 1.0},
+        "seed": 8,
+    })
+    kernels.runtime.ensure("cpu")
+    states = []
+    for backend in ("cpu", "cuda"):
+        k = kernel_for("vicsek")(sc, DevicePolicy.for_backend(backend))
+        blocked = k.kernel is block_step_kernel(sc.inclusive, False, dim)
+        assert blocked == (backend == "cpu")
+        for step in range(10):
+            k.step(step)
+        states.append(k.frame(["position", "heading"]))
+    for name in states[0]:
+        np.testing.assert_array_equal(states[0][name], states[1][name])

@@ -110,7 +110,7 @@ class VicsekKernel(ModelKernel):
         variant = (RULES[p.rule], scenario.inclusive, self.periodic,
                    p.position_update == "new_heading")
         self.kernel = step_kernel(*variant, False, dim)
-        if p.rule == "vicsek" and self.grid.blocks:  # the same bits, by cell
+        if p.rule == "vicsek" and self.grid.blocks and policy.cell_blocks:  # same bits
             self.kernel = block_step_kernel(scenario.inclusive,
                                             p.position_update == "new_heading", dim)
         self.kernel_with_graph = step_kernel(*variant, True, dim)
