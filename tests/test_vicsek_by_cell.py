@@ -112,6 +112,19 @@ def test_fewer_than_three_cells_across_keep_the_per_agent_step():
     assert k.kernel is step_kernel(RULES["vicsek"], False, True, False, False, 3)
 
 
+def random_box(dim, L, n, eta, steps, seed, recording=None) -> Scenario:
+    """N agents at random in the periodic box of side L, r = 1, v0 = 0.3."""
+    return Scenario.model_validate({
+        "model": {"kind": "vicsek", "v0": 0.3, "eta": eta},
+        "space": {"kind": "periodic", "L": L, "dimension": dim},
+        "neighbours": {"radius": 1.0},
+        "initial": {"kind": "random", "N": n},
+        "time": {"steps": steps, "dt": 1.0},
+        "recording": recording or {},
+        "seed": seed,
+    })
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_observing_every_step_leaves_the_trajectory_unchanged(dim, monkeypatch):
     """Observed steps take the per-agent visit (with the graph), the others the by-cell
@@ -119,16 +132,9 @@ def test_observing_every_step_leaves_the_trajectory_unchanged(dim, monkeypatch):
     monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)  # the per-step path
     finals = []
     for every in (1, 30):
-        sc = Scenario.model_validate({
-            "model": {"kind": "vicsek", "v0": 0.3, "eta": 1.5},
-            "space": {"kind": "periodic", "L": 6.0, "dimension": dim},
-            "neighbours": {"radius": 1.0},
-            "initial": {"kind": "random", "N": 2000},
-            "time": {"steps": 30, "dt": 1.0},
-            "recording": {"every": 30, "observables_every": every,
-                          "arrays": ["position", "heading"]},
-            "seed": 3,
-        })
+        sc = random_box(dim, 6.0, 2000, eta=1.5, steps=30, seed=3,
+                        recording={"every": 30, "observables_every": every,
+                                   "arrays": ["position", "heading"]})
         sink = Frames()
         res = kernels.run(sc, sink=sink)
         assert res.status == "completed", res.error
@@ -146,14 +152,7 @@ def test_a_gpu_policy_steps_per_agent_to_the_same_bits(dim):
     """A GPU keeps a thread per agent (DevicePolicy.cell_blocks False), built here on the
     CPU with the GPU's policy (its parallel scatter too): the trajectory's bits are the
     CPU policy's."""
-    sc = Scenario.model_validate({
-        "model": {"kind": "vicsek", "v0": 0.3, "eta": 1.0},
-        "space": {"kind": "periodic", "L": 7.0, "dimension": dim},
-        "neighbours": {"radius": 1.0},
-        "initial": {"kind": "random", "N": 3000},
-        "time": {"steps": 10, "dt": 1.0},
-        "seed": 8,
-    })
+    sc = random_box(dim, 7.0, 3000, eta=1.0, steps=10, seed=8)
     kernels.runtime.ensure("cpu")
     states = []
     for backend in ("cpu", "cuda"):

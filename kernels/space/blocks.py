@@ -28,7 +28,7 @@ the per-agent step's time in 3D, 0.77 in 2D.
 
 import taichi as ti
 
-from .grid import PERIODIC_REACH, row, shifted, wrap_cell
+from .grid import PERIODIC_REACH, box_layer, row, shifted, wrap_cell
 
 BLOCK_LANES = 4  # agents per block: four doubles fill an AVX2 register
 
@@ -57,6 +57,12 @@ def dense_cell(bucket, gi: ti.template(), dim: ti.template()):
         c[1] = (bucket // gi[0]) % gi[1]
         c[2] = bucket // (gi[0] * gi[1])
     return c
+
+
+@ti.func
+def dense_row_start(ry, rz, gi: ti.template()):
+    """The bucket of DenseGrid cell (0, ry, rz): rows of x-cells are contiguous."""
+    return gi[0] * (ry + gi[1] * rz)
 
 
 @ti.func
@@ -138,11 +144,7 @@ def make_block_visitor(pair, dim: int, layout: str):
         L = gf[1]
         for e in ti.static(layers):
             s = ti.Vector.zero(float, dim)
-            layer = 0
-            if ti.static(dim == 3):
-                bz, sz = wrap_cell(c[2] + e, nc, L)
-                s[2] = sz
-                layer = nc * nc * bz
+            layer = box_layer(c, e, nc, L, s)
             for b in range(-R, R + 1):
                 by, sy = wrap_cell(c[1] + b, nc, L)
                 s[1] = sy
@@ -172,7 +174,7 @@ def make_block_visitor(pair, dim: int, layout: str):
             for b in range(3):
                 ry = c[1] + b - 1
                 if inside & (ry >= 0) & (ry < gi[1]):
-                    r0 = gi[0] * (ry + gi[1] * rz)
+                    r0 = dense_row_start(ry, rz, gi)
                     for k in range(start[r0 + lo], start[r0 + hi + 1]):
                         pair(k, row(pos, k, dim), Iv, X, acc, S)
 

@@ -454,6 +454,18 @@ def wrap_cell(b, nc, L):
     return b, shift
 
 
+@ti.func
+def box_layer(c, e: ti.template(), nc, L, s: ti.template()):
+    """The first bucket of the box's layer c[2] + e (3D; 0 in 2D), with that layer's seam
+    shift put into s[2]."""
+    layer = 0
+    if ti.static(c.n == 3):
+        bz, sz = wrap_cell(c[2] + e, nc, L)
+        s[2] = sz
+        layer = nc * nc * bz
+    return layer
+
+
 def make_visitor(pair, half: bool = False, dim: int = 2):
     """Return a Taichi function `visit(i, xi, acc, pos, G, S, periodic)` that folds
     `acc = pair(i, k, d, acc, S)` over every agent k in the cells around position xi
@@ -485,11 +497,7 @@ def make_visitor(pair, half: bool = False, dim: int = 2):
                 # that makes r_k + shift the image nearest r_i.
                 for e in ti.static(box_layers):
                     s = ti.Vector.zero(float, dim)
-                    layer = 0
-                    if ti.static(dim == 3):
-                        bz, sz = wrap_cell(c[2] + e, nc, L)
-                        s[2] = sz
-                        layer = nc * nc * bz
+                    layer = box_layer(c, e, nc, L, s)
                     own_layer = ti.static(half and e == 0)
                     for b in range(ti.static(0 if own_layer else -R), R + 1):
                         by, sy = wrap_cell(c[1] + b, nc, L)

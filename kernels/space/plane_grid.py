@@ -23,16 +23,11 @@ import taichi as ti
 from .. import runtime
 from ..result import SimulationDiverged
 from ..runtime import DevicePolicy
+from .blocks import dense_row_start, make_block_visitor
 from .grid import Grid, bbox_buffer, bounding_box, max_cells_across, row, space_cell, widen
 
 nd = ti.types.ndarray()
 CELLS_PER_AGENT = 4
-
-
-@ti.func
-def _row_start(ry, rz, gi: ti.template()):
-    """The bucket of cell (0, ry, rz): rows of x-cells are contiguous."""
-    return gi[0] * (ry + gi[1] * rz)
 
 
 @ti.kernel
@@ -46,7 +41,7 @@ def _assign(pos: nd, key: nd, count: nd, gf: nd, gi: nd, dim: ti.template()):
         c = space_cell(row(pos, i, dim), gf, 1)
         k = c[0] + gi[0] * c[1]
         if ti.static(dim == 3):
-            k = c[0] + _row_start(c[1], c[2], gi)
+            k = c[0] + dense_row_start(c[1], c[2], gi)
         key[i] = k
         ti.atomic_add(count[k], 1)
 
@@ -131,28 +126,19 @@ class DenseGrid:
 
 def make_dense_visitor(pair, dim: int = 2):
     """grid.make_visitor's interface over a DenseGrid: three contiguous rows of three cells
-    (3D: nine rows, z layers outermost)."""
-    layers = range(-1, 2) if dim == 3 else range(1)
+    (3D: nine rows, z layers outermost), as blocks.make_block_visitor reads them for a
+    block of one agent."""
+
+    @ti.func
+    def agent_pair(k, p, i, xi, acc: ti.template(), S: ti.template()):
+        acc = pair(i, k, p - xi, acc, S)  # a store into the visit's acc (a template)
+
+    rows = make_block_visitor(agent_pair, dim, "dense")
 
     @ti.func
     def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
               periodic: ti.template()):
-        start, gf, gi = ti.static(G[0], G[2], G[3])
-        c = space_cell(xi, gf, 1)
-        lo = ti.max(c[0] - 1, 0)
-        hi = ti.min(c[0] + 1, gi[0] - 1)
-        for e in ti.static(layers):
-            rz = 0
-            inside = lo <= hi
-            if ti.static(dim == 3):
-                rz = c[2] + e
-                inside = inside & (rz >= 0) & (rz < gi[2])
-            for b in range(3):
-                ry = c[1] + b - 1
-                if inside & (ry >= 0) & (ry < gi[1]):
-                    r0 = _row_start(ry, rz, gi)
-                    for k in range(start[r0 + lo], start[r0 + hi + 1]):
-                        acc = pair(i, k, row(pos, k, dim) - xi, acc, S)
+        rows(space_cell(xi, ti.static(G[2]), 1), i, xi, acc, pos, G, S)
         return acc
 
     return visit

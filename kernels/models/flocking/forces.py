@@ -156,106 +156,93 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
         return acc
 
     @ti.func
-    def euler_update(i, xi, vi, sums, pos_out: ti.template(), vel_out: ti.template(),
-                     prm: ti.template(), nav: ti.template(), bad: ti.template(),
-                     OB: ti.template()):
+    def euler_update(i, xi, vi, sums, OUT: ti.template(), prm: ti.template(),
+                     nav: ti.template(), bad: ti.template(), OB: ti.template()):
+        """Semi-implicit Euler into OUT = (pos_out, vel_out)."""
         v = vi + prm[P.DT] * control(i, xi, vi, sums, prm, nav, OB)
         x = xi + prm[P.DT] * v
-        put(pos_out, i, x)
-        put(vel_out, i, v)
+        put(OUT[0], i, x)
+        put(OUT[1], i, v)
         if nonfinite(x, v):
             ti.atomic_add(bad[0], 1)
 
     @ti.func
-    def accel_update(i, xi, vi, sums, acc_out: ti.template(), prm: ti.template(),
+    def accel_update(i, xi, vi, sums, OUT: ti.template(), prm: ti.template(),
                      nav: ti.template(), bad: ti.template(), OB: ti.template()):
+        """u_i into OUT = (acc_out,)."""
         u = control(i, xi, vi, sums, prm, nav, OB)
-        put(acc_out, i, u)
+        put(OUT[0], i, u)
         if nonfinite(u, xi):
             ti.atomic_add(bad[0], 1)
 
-    if search == "dense" and blocks:
-        # By cell blocks (kernels/space/blocks.py): every agent's sums in the per-agent
-        # visit's order, so the same bits, with one pass over the rows per block.
-        visit_block = make_block_visitor(lanes(pair), dim, "dense")
+    # On the dense grid by cell blocks (kernels/space/blocks.py): every agent's sums in the
+    # per-agent visit's order, so the same bits, with one pass over the rows per block.
+    by_cells = search == "dense" and blocks
+    visit_block = make_block_visitor(lanes(pair), dim, "dense")
+
+    def each(update):
+        """`update` for one cell's agents, by blocks, and for one agent alone."""
 
         @ti.func
-        def block_sums(i0, m, c, pos: ti.template(), vel: ti.template(), rad: ti.template(),
-                       prm: ti.template(), G: ti.template()):
-            Iv, X = load_block(pos, i0, m, dim)
-            sums = ti.Matrix.zero(float, BLOCK_LANES, dim + 1)
-            visit_block(c, Iv, X, sums, pos, G, ti.static((vel, rad, prm)))
-            return Iv, X, sums
+        def cell(bucket, pos: ti.template(), vel: ti.template(), rad: ti.template(),
+                 prm: ti.template(), nav: ti.template(), bad: ti.template(), OUT: ti.template(),
+                 G: ti.template(), OB: ti.template()):
+            start = ti.static(G[0])
+            c = cell_of(bucket, G, "dense", dim)
+            i0 = start[bucket]
+            while i0 < start[bucket + 1]:
+                m = ti.min(start[bucket + 1] - i0, BLOCK_LANES)
+                Iv, X = load_block(pos, i0, m, dim)
+                sums = ti.Matrix.zero(float, BLOCK_LANES, dim + 1)
+                visit_block(c, Iv, X, sums, pos, G, ti.static((vel, rad, prm)))
+                for q in ti.static(range(BLOCK_LANES)):
+                    if q < m:
+                        i = Iv[q]
+                        update(i, lane(X, q), row(vel, i, dim), lane(sums, q), OUT, prm, nav,
+                               bad, OB)
+                i0 += BLOCK_LANES
 
-        @ti.kernel
-        def euler(pos: nd, vel: nd, rad: nd, pos_out: nd, vel_out: nd, prm: nd, nav: nd,
-                  bad: nd, start: nd, cid: nd, gf: nd, gi: nd,
-                  opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
-            G = ti.static((start, cid, gf, gi))
-            OB = ti.static((opos, orad, ostart, ocid, ogf, ogi))
-            for bucket in range(n_cells(G, "dense", dim)):
-                c = cell_of(bucket, G, "dense", dim)
-                i0 = start[bucket]
-                while i0 < start[bucket + 1]:
-                    m = ti.min(start[bucket + 1] - i0, BLOCK_LANES)
-                    Iv, X, sums = block_sums(i0, m, c, pos, vel, rad, prm, G)
-                    for q in ti.static(range(BLOCK_LANES)):
-                        if q < m:
-                            i = Iv[q]
-                            euler_update(i, lane(X, q), row(vel, i, dim), lane(sums, q),
-                                         pos_out, vel_out, prm, nav, bad, OB)
-                    i0 += BLOCK_LANES
+        @ti.func
+        def agent(i, pos: ti.template(), vel: ti.template(), rad: ti.template(),
+                  prm: ti.template(), nav: ti.template(), bad: ti.template(), OUT: ti.template(),
+                  G: ti.template(), OB: ti.template()):
+            xi = row(pos, i, dim)
+            sums = visit(i, xi, ti.Vector.zero(float, dim + 1), pos, G,
+                         ti.static((vel, rad, prm)), False)
+            update(i, xi, row(vel, i, dim), sums, OUT, prm, nav, bad, OB)
 
-        @ti.kernel
-        def accel(pos: nd, vel: nd, rad: nd, acc_out: nd, prm: nd, nav: nd, bad: nd,
-                  start: nd, cid: nd, gf: nd, gi: nd,
-                  opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
-            G = ti.static((start, cid, gf, gi))
-            OB = ti.static((opos, orad, ostart, ocid, ogf, ogi))
-            for bucket in range(n_cells(G, "dense", dim)):
-                c = cell_of(bucket, G, "dense", dim)
-                i0 = start[bucket]
-                while i0 < start[bucket + 1]:
-                    m = ti.min(start[bucket + 1] - i0, BLOCK_LANES)
-                    Iv, X, sums = block_sums(i0, m, c, pos, vel, rad, prm, G)
-                    for q in ti.static(range(BLOCK_LANES)):
-                        if q < m:
-                            i = Iv[q]
-                            accel_update(i, lane(X, q), row(vel, i, dim), lane(sums, q),
-                                         acc_out, prm, nav, bad, OB)
-                    i0 += BLOCK_LANES
+        return cell, agent
 
-        return euler, accel
-
-    @ti.func
-    def agent_sums(i, xi, pos: ti.template(), vel: ti.template(), rad: ti.template(),
-                   prm: ti.template(), G: ti.template()):
-        return visit(i, xi, ti.Vector.zero(float, dim + 1), pos, G,
-                     ti.static((vel, rad, prm)), False)
+    euler_cell, euler_agent = each(euler_update)
+    accel_cell, accel_agent = each(accel_update)
 
     @ti.kernel
     def euler(pos: nd, vel: nd, rad: nd, pos_out: nd, vel_out: nd, prm: nd, nav: nd, bad: nd,
               start: nd, cid: nd, gf: nd, gi: nd,
               opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
         G = ti.static((start, cid, gf, gi))
-        OB = ti.static((opos, orad, ostart, ocid, ogf, ogi))
-        for i in range(pos.shape[0]):
-            xi = row(pos, i, dim)
-            vi = row(vel, i, dim)
-            euler_update(i, xi, vi, agent_sums(i, xi, pos, vel, rad, prm, G), pos_out,
-                         vel_out, prm, nav, bad, OB)
+        args = ti.static((pos, vel, rad, prm, nav, bad, (pos_out, vel_out), G,
+                          (opos, orad, ostart, ocid, ogf, ogi)))
+        if ti.static(by_cells):
+            for bucket in range(n_cells(G, "dense", dim)):
+                euler_cell(bucket, *args)
+        else:
+            for i in range(pos.shape[0]):
+                euler_agent(i, *args)
 
     @ti.kernel
     def accel(pos: nd, vel: nd, rad: nd, acc_out: nd, prm: nd, nav: nd, bad: nd,
               start: nd, cid: nd, gf: nd, gi: nd,
               opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
         G = ti.static((start, cid, gf, gi))
-        OB = ti.static((opos, orad, ostart, ocid, ogf, ogi))
-        for i in range(pos.shape[0]):
-            xi = row(pos, i, dim)
-            vi = row(vel, i, dim)
-            accel_update(i, xi, vi, agent_sums(i, xi, pos, vel, rad, prm, G), acc_out, prm,
-                         nav, bad, OB)
+        args = ti.static((pos, vel, rad, prm, nav, bad, (acc_out,), G,
+                          (opos, orad, ostart, ocid, ogf, ogi)))
+        if ti.static(by_cells):
+            for bucket in range(n_cells(G, "dense", dim)):
+                accel_cell(bucket, *args)
+        else:
+            for i in range(pos.shape[0]):
+                accel_agent(i, *args)
 
     return euler, accel
 
