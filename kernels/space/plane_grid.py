@@ -23,7 +23,7 @@ import taichi as ti
 from .. import runtime
 from ..result import SimulationDiverged
 from ..runtime import DevicePolicy
-from .blocks import dense_row_start, make_block_visitor
+from .blocks import dense_row_start
 from .grid import Grid, bbox_buffer, bounding_box, max_cells_across, row, space_cell, widen
 
 nd = ti.types.ndarray()
@@ -126,19 +126,31 @@ class DenseGrid:
 
 def make_dense_visitor(pair, dim: int = 2):
     """grid.make_visitor's interface over a DenseGrid: three contiguous rows of three cells
-    (3D: nine rows, z layers outermost), as blocks.make_block_visitor reads them for a
-    block of one agent."""
-
-    @ti.func
-    def agent_pair(k, p, i, xi, acc: ti.template(), S: ti.template()):
-        acc = pair(i, k, p - xi, acc, S)  # a store into the visit's acc (a template)
-
-    rows = make_block_visitor(agent_pair, dim, "dense")
+    (3D: nine rows, z layers outermost). The rows blocks.make_block_visitor reads for a
+    cell's agents together, written out again: the per-agent visit folded through that
+    in-place interface measured slower (M4 F1's step at 10^6, three alternating pairs of
+    processes: 113-118 ms against 99-116 ms)."""
+    layers = range(-1, 2) if dim == 3 else range(1)
 
     @ti.func
     def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
               periodic: ti.template()):
-        rows(space_cell(xi, ti.static(G[2]), 1), i, xi, acc, pos, G, S)
+        start, gf, gi = ti.static(G[0], G[2], G[3])
+        c = space_cell(xi, gf, 1)
+        lo = ti.max(c[0] - 1, 0)
+        hi = ti.min(c[0] + 1, gi[0] - 1)
+        for e in ti.static(layers):
+            rz = 0
+            inside = lo <= hi
+            if ti.static(dim == 3):
+                rz = c[2] + e
+                inside = inside & (rz >= 0) & (rz < gi[2])
+            for b in range(3):
+                ry = c[1] + b - 1
+                if inside & (ry >= 0) & (ry < gi[1]):
+                    r0 = dense_row_start(ry, rz, gi)
+                    for k in range(start[r0 + lo], start[r0 + hi + 1]):
+                        acc = pair(i, k, row(pos, k, dim) - xi, acc, S)
         return acc
 
     return visit
