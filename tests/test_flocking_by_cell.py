@@ -2,8 +2,10 @@
 the per-agent visit they replace: the same bits for every agent's step (euler) and control
 (accel, the RK4 stages), in 2D and 3D, with the uniform radius and M3's per-agent radii
 (rules own and min) and navigation, strict and inclusive, pairs exactly at R, and crowded
-cells (blocks of four and a remainder). The brute-force references check the engine itself
-in tests/test_flocking_reference.py and tests/test_flocking_3d.py."""
+cells (blocks of four and a remainder; rows longer than the sieve's lists, and agents with
+more neighbours than a list holds, so that the pair runs mid-row). The brute-force
+references check the engine itself in tests/test_flocking_reference.py and
+tests/test_flocking_3d.py."""
 
 import numpy as np
 import pytest
@@ -11,6 +13,7 @@ import pytest
 from flocklab import kernels
 from flocklab.kernels.model import kernel_for
 from flocklab.kernels.models.flocking.forces import grid_kernels
+from flocklab.kernels.space.blocks import SIEVE_CAP
 from flocklab.schemas import Scenario
 from tests.test_flocking_reference import m2_scenario, m3_scenario
 
@@ -74,3 +77,7 @@ def test_by_cell_kernels_equal_the_per_agent_ones_bit_for_bit(case):
     # Not vacuous: the control is not zero, and some cells hold more than one agent.
     assert np.abs(want[2]).max() > 0
     assert np.diff(k.grid.view()[0].to_numpy()[: k.grid.n_buckets + 1]).max() > 1
+    if "crowded" in case:  # the lists fill: the pair runs before a row is through
+        pos = k.state["pos"].to_numpy()
+        d2 = ((pos[:, None, :] - pos[None, :, :]) ** 2).sum(-1)
+        assert (d2 < sc.neighbours.radius**2).sum(1).max() > 2 * SIEVE_CAP

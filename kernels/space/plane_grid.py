@@ -126,8 +126,8 @@ class DenseGrid:
 
 def make_dense_visitor(pair, dim: int = 2):
     """grid.make_visitor's interface over a DenseGrid: three contiguous rows of three cells
-    (3D: nine rows, z layers outermost). The rows blocks.make_block_visitor reads for a
-    cell's agents together, written out again: the per-agent visit folded through that
+    (3D: nine rows, z layers outermost). The rows blocks.make_sieved_visitor reads for a cell's
+    agents together, written out again: the per-agent visit folded through that
     in-place interface measured slower (M4 F1's step at 10^6, three alternating pairs of
     processes: 113-118 ms against 99-116 ms)."""
     layers = range(-1, 2) if dim == 3 else range(1)

@@ -18,8 +18,8 @@ M2's kernels take the dimension `dim` (2 or 3) at compile time: the law needs on
 |r_ij| and the vectors r_ij, v_ij, so one source serves both (2D arithmetic unchanged).
 M3's navigation and adaptive radius take `dim` too.
 On the dense grid the metric kernels go by cell blocks (kernels/space/blocks.py: up to four
-agents of a cell share one pass over their neighbour cells), bit for bit the per-agent
-visit's sums.
+agents of a cell share one pass over their neighbour cells, a distance test lists each
+one's neighbours, and the pair runs for those), bit for bit the per-agent visit's sums.
 """
 
 from functools import cache
@@ -30,9 +30,8 @@ from ...space.blocks import (
     BLOCK_LANES,
     cell_of,
     lane,
-    lanes,
     load_block,
-    make_block_visitor,
+    make_sieved_visitor,
     n_cells,
 )
 from ...space.graph import find, link
@@ -175,10 +174,18 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
         if nonfinite(u, xi):
             ti.atomic_add(bad[0], 1)
 
+    @ti.func
+    def sieve(i, k, s2, S: ti.template()):
+        """1 where pair's terms may be nonzero: j in N_i (the force needs s < R_ij, inside
+        it); the agent itself passes (s = 0) and pair drops it."""
+        rad, prm = ti.static(S[1], S[2])
+        return within(s2, pair_radius2(rule, i, k, rad, prm), inclusive)
+
     # On the dense grid by cell blocks (kernels/space/blocks.py): every agent's sums in the
-    # per-agent visit's order, so the same bits, with one pass over the rows per block.
+    # per-agent visit's order, so the same bits, with one pass over the rows per block and
+    # the pair for the sieved neighbours alone.
     by_cells = search == "dense" and blocks
-    visit_block = make_block_visitor(lanes(pair), dim, "dense")
+    visit_block = make_sieved_visitor(sieve, pair, dim)
 
     def each(update):
         """`update` for one cell's agents, by blocks, and for one agent alone."""

@@ -191,7 +191,7 @@ def block_step_kernel(inclusive: bool, move_new: bool, dim: int = 2):
             for a in ti.static(range(4)):
                 acc[q, a] += w[q] * ek4[a]
 
-    visit_block = make_block_visitor(pair, dim, "box")
+    visit_block = make_block_visitor(pair, dim)
 
     @ti.kernel
     def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, ew_out: nd,
