@@ -35,6 +35,9 @@ from .grid import PERIODIC_REACH, box_layer, row, shifted, wrap_cell
 
 BLOCK_LANES = 4  # agents per block: four doubles fill an AVX2 register
 SIEVE_CAP = 64  # candidates a sieved visit lists per lane before it runs the pair
+# Listed neighbours whose terms a sieved visit computes side by side: M2's step ran as fast
+# with 4 (3D 0.8-0.9 of one at a time) and took 2-3 s longer to compile.
+PAIRS_AT_ONCE = 2
 
 
 @ti.func
@@ -149,9 +152,9 @@ def make_block_visitor(pair, dim: int):
 
 def make_sieved_visitor(sieve, pair, dim: int):
     """`visit_block(c, I, X, acc, pos, G, S)` on a DenseGrid for a per-agent pair
-    `pair(i, k, d, acc, S) -> acc` whose terms are exact zeros (or nothing) for the
-    candidates that `sieve(i, k, d2, S)` (0 or 1) rejects: each lane's sum is the per-agent
-    visit's, bit for bit (an added zero changes no sum that starts at +0).
+    `pair(i, k, d, acc, S) -> acc + term` whose term is zero for the agent itself and for
+    the candidates that `sieve(i, k, d2, S)` (0 or 1) rejects: each lane's sum is the
+    per-agent visit's, bit for bit (adding a zero changes no sum that starts at +0).
 
     Two passes over each stretch of at most SIEVE_CAP candidates: the sieve for every
     lane and candidate, branch-free (a distance test, four lanes to a vector register),
@@ -159,65 +162,76 @@ def make_sieved_visitor(sieve, pair, dim: int):
     the visit's order. A pair that costs a division and a branch then runs for the
     neighbours alone (M2 in 3D: about 18 of 98 candidates), not for every candidate."""
 
-    layers = range(-1, 2) if dim == 3 else range(1)
+    rows = 3 ** (dim - 1)  # of the 3x3 (3x3x3) block: 3 (9)
 
     @ti.func
     def flush(Iv, X: ti.template(), acc: ti.template(), pos: ti.template(), S: ti.template(),
               listed: ti.template(), count: ti.template()):
         """pair over each live lane's list (a short block's spare lanes repeat its last
-        agent: skipped), and the lists emptied."""
+        agent: skipped), and the lists emptied. PAIRS_AT_ONCE listed agents at a time:
+        their terms side by side (vector instructions: one division for two), then added
+        in the list's order; the list is padded with the agent itself, whose term is
+        zero."""
         for q in ti.static(range(BLOCK_LANES)):
             live = True
             if ti.static(q > 0):
                 live = Iv[q] != Iv[q - 1]
             if live:
+                i = Iv[q]
                 a = lane(acc, q)
                 xq = lane(X, q)
-                for e in range(count[q]):
-                    k = listed[q, e]
-                    a = pair(Iv[q], k, row(pos, k, dim) - xq, a, S)
-                for j in ti.static(range(acc.m)):
-                    acc[q, j] = a[j]
+                for j in ti.static(range(PAIRS_AT_ONCE - 1)):
+                    listed[q, count[q] + j] = i
+                e0 = 0
+                while e0 < count[q]:
+                    T = ti.Matrix.zero(float, PAIRS_AT_ONCE, acc.m)
+                    for j in ti.static(range(PAIRS_AT_ONCE)):
+                        k = listed[q, e0 + j]
+                        t = pair(i, k, row(pos, k, dim) - xq, ti.Vector.zero(float, acc.m), S)
+                        for m in ti.static(range(acc.m)):
+                            T[j, m] = t[m]
+                    for j in ti.static(range(PAIRS_AT_ONCE)):
+                        a = a + lane(T, j)
+                    e0 += PAIRS_AT_ONCE
+                for m in ti.static(range(acc.m)):
+                    acc[q, m] = a[m]
             count[q] = 0
-
-    @ti.func
-    def sieve_row(k0, k1, Iv, X: ti.template(), acc: ti.template(), pos: ti.template(),
-                  S: ti.template(), listed: ti.template(), count: ti.template()):
-        """The sieve over one row's agents k0 .. k1 - 1, a list's room at a time."""
-        while k0 < k1:
-            k2 = ti.min(k1, k0 + SIEVE_CAP)
-            if count.max() + (k2 - k0) > SIEVE_CAP:
-                flush(Iv, X, acc, pos, S, listed, count)
-            for k in range(k0, k2):
-                p = row(pos, k, dim)
-                for q in ti.static(range(BLOCK_LANES)):
-                    d = p - lane(X, q)
-                    listed[q, count[q]] = k  # kept only if the count moves past it
-                    count[q] += sieve(Iv[q], k, d.dot(d), S)
-            k0 = k2
 
     @ti.func
     def visit_block(c, Iv, X: ti.template(), acc: ti.template(), pos: ti.template(),
                     G: ti.template(), S: ti.template()):
         """The rows of cell c's 3x3 (3x3x3) block in the per-agent visit's order (z layers
-        outermost, then y; a row's three cells are contiguous)."""
+        outermost, then y; a row's three cells are contiguous), each sieved a list's room
+        at a time; one row past the last runs the final pair pass (one call of flush in
+        the code: it is compiled once)."""
         start, gi = ti.static(G[0], G[3])
-        listed = ti.Matrix.zero(ti.i32, BLOCK_LANES, SIEVE_CAP)
+        listed = ti.Matrix.zero(ti.i32, BLOCK_LANES, SIEVE_CAP + PAIRS_AT_ONCE - 1)
         count = ti.Vector.zero(ti.i32, BLOCK_LANES)
         lo = ti.max(c[0] - 1, 0)
         hi = ti.min(c[0] + 1, gi[0] - 1)
-        for e in ti.static(layers):
+        for r in range(rows + 1):
+            k0, k1 = 0, 0
+            ry = c[1] + r % 3 - 1
             rz = 0
-            inside = lo <= hi
+            inside = (r < rows) & (lo <= hi) & (ry >= 0) & (ry < gi[1])
             if ti.static(dim == 3):
-                rz = c[2] + e
+                rz = c[2] + r // 3 - 1
                 inside = inside & (rz >= 0) & (rz < gi[2])
-            for b in range(3):
-                ry = c[1] + b - 1
-                if inside & (ry >= 0) & (ry < gi[1]):
-                    r0 = dense_row_start(ry, rz, gi)
-                    sieve_row(start[r0 + lo], start[r0 + hi + 1], Iv, X, acc, pos, S, listed,
-                              count)
-        flush(Iv, X, acc, pos, S, listed, count)
+            if inside:
+                r0 = dense_row_start(ry, rz, gi)
+                k0, k1 = start[r0 + lo], start[r0 + hi + 1]
+            more = True
+            while more:
+                k2 = ti.min(k1, k0 + SIEVE_CAP)
+                if (r == rows) | (count.max() + (k2 - k0) > SIEVE_CAP):
+                    flush(Iv, X, acc, pos, S, listed, count)
+                for k in range(k0, k2):
+                    p = row(pos, k, dim)
+                    for q in ti.static(range(BLOCK_LANES)):
+                        d = p - lane(X, q)
+                        listed[q, count[q]] = k  # kept only if the count moves past it
+                        count[q] += sieve(Iv[q], k, d.dot(d), S)
+                k0 = k2
+                more = k0 < k1
 
     return visit_block
