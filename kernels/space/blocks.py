@@ -160,7 +160,7 @@ def make_sieved_visitor(sieve, pair, dim: int):
     lane and candidate, branch-free (a distance test, four lanes to a vector register),
     listing the candidates it keeps per lane; then `pair` over each live lane's list, in
     the visit's order. A pair that costs a division and a branch then runs for the
-    neighbours alone (M2 in 3D: about 18 of 98 candidates), not for every candidate."""
+    neighbours alone (M2 in 3D: about 16 of 98 candidates), not for every candidate."""
 
     rows = 3 ** (dim - 1)  # of the 3x3 (3x3x3) block: 3 (9)
 
