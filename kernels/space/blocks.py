@@ -12,10 +12,11 @@ with the same displacement bits: p - x_i, p = r_k plus the periodic image shift 
 grid.make_visitor adds it. So a step by blocks is bit for bit the step by agents (which
 the observation steps keep using, with their graph bookkeeping).
 
-A kernel loops over cells (`for bucket in range(n_cells)`), cuts each cell's agents into
-blocks of BLOCK_LANES (the last one short: its spare lanes repeat its last agent, computed
-and not written), and calls `visit_block(c, I, X, acc, pos, G, S)`: acc (BLOCK_LANES x
-width) += the block's candidates' terms. Two visitors:
+A kernel loops over cells (`for bucket in range(n_cells)`) and calls a `make_cell_pass`
+function: it cuts the cell's agents into blocks of BLOCK_LANES (the last one short: its
+spare lanes repeat its last agent, computed and not written), calls `visit_block(c, I, X,
+acc, pos, G, S)`: acc (BLOCK_LANES x width) += the block's candidates' terms, and then the
+model's update for each agent. Two visitors:
 - `make_block_visitor(pair, dim)`, the periodic box with at least 3 cells across
   (Grid.blocks): a block pair `pair(k, p, I, X, acc, S)` for every candidate (Vicsek's
   step: its pair is a few multiplications, written four lanes wide).
@@ -114,6 +115,32 @@ def load_block(pos: ti.template(), i0, m, dim: ti.template()):
 def lane(M, q: ti.template()):
     """Row q of the matrix M as a vector."""
     return ti.Vector([M[q, a] for a in ti.static(range(M.m))])
+
+
+def make_cell_pass(visit_block, update, width: int, layout: str, dim: int):
+    """Return `cell_pass(bucket, pos, G, S, F, v)`: the agents of cell `bucket` in blocks
+    of BLOCK_LANES, each block's sums (BLOCK_LANES x width, from zero) from
+    `visit_block(c, I, X, sums, pos, G, S)`, then `update(i, x_i, sums_i, F, v)` for each
+    of the block's agents. F: the update's arrays (a static tuple); v: its runtime values
+    (a small vector: Vicsek's noise keys)."""
+
+    @ti.func
+    def cell_pass(bucket, pos: ti.template(), G: ti.template(), S: ti.template(),
+                  F: ti.template(), v):
+        start = ti.static(G[0])
+        c = cell_of(bucket, G, layout, dim)
+        i0 = start[bucket]
+        while i0 < start[bucket + 1]:
+            m = ti.min(start[bucket + 1] - i0, BLOCK_LANES)
+            Iv, X = load_block(pos, i0, m, dim)
+            sums = ti.Matrix.zero(float, BLOCK_LANES, width)
+            visit_block(c, Iv, X, sums, pos, G, S)
+            for q in ti.static(range(BLOCK_LANES)):
+                if q < m:
+                    update(Iv[q], lane(X, q), lane(sums, q), F, v)
+            i0 += BLOCK_LANES
+
+    return cell_pass
 
 
 def make_block_visitor(pair, dim: int):

@@ -26,14 +26,7 @@ from functools import cache
 
 import taichi as ti
 
-from ...space.blocks import (
-    BLOCK_LANES,
-    cell_of,
-    lane,
-    load_block,
-    make_sieved_visitor,
-    n_cells,
-)
+from ...space.blocks import make_cell_pass, make_sieved_visitor, n_cells
 from ...space.graph import find, link
 from ...space.grid import make_visitor, row, within
 from ...space.params import Slots
@@ -191,23 +184,18 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
         """`update` for one cell's agents, by blocks, and for one agent alone."""
 
         @ti.func
+        def block_update(i, xi, sums, F: ti.template(), unused):
+            vel, prm, nav, bad, OUT, OB = ti.static(F)
+            update(i, xi, row(vel, i, dim), sums, OUT, prm, nav, bad, OB)
+
+        cell_pass = make_cell_pass(visit_block, block_update, dim + 1, "dense", dim)
+
+        @ti.func
         def cell(bucket, pos: ti.template(), vel: ti.template(), rad: ti.template(),
                  prm: ti.template(), nav: ti.template(), bad: ti.template(), OUT: ti.template(),
                  G: ti.template(), OB: ti.template()):
-            start = ti.static(G[0])
-            c = cell_of(bucket, G, "dense", dim)
-            i0 = start[bucket]
-            while i0 < start[bucket + 1]:
-                m = ti.min(start[bucket + 1] - i0, BLOCK_LANES)
-                Iv, X = load_block(pos, i0, m, dim)
-                sums = ti.Matrix.zero(float, BLOCK_LANES, dim + 1)
-                visit_block(c, Iv, X, sums, pos, G, ti.static((vel, rad, prm)))
-                for q in ti.static(range(BLOCK_LANES)):
-                    if q < m:
-                        i = Iv[q]
-                        update(i, lane(X, q), row(vel, i, dim), lane(sums, q), OUT, prm, nav,
-                               bad, OB)
-                i0 += BLOCK_LANES
+            cell_pass(bucket, pos, G, ti.static((vel, rad, prm)),
+                      ti.static((vel, prm, nav, bad, OUT, OB)), ti.Vector([0]))
 
         @ti.func
         def agent(i, pos: ti.template(), vel: ti.template(), rad: ti.template(),

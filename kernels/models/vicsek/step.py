@@ -23,7 +23,7 @@ from functools import cache
 import taichi as ti
 
 from ...space import rng, trig
-from ...space.blocks import BLOCK_LANES, cell_of, lane, load_block, make_block_visitor, n_cells
+from ...space.blocks import BLOCK_LANES, lane, make_block_visitor, make_cell_pass, n_cells
 from ...space.graph import find, link
 from ...space.grid import make_visitor, row, set_row, within
 from ...space.params import Slots
@@ -191,7 +191,13 @@ def block_step_kernel(inclusive: bool, move_new: bool, dim: int = 2):
             for a in ti.static(range(4)):
                 acc[q, a] += w[q] * ek4[a]
 
-    visit_block = make_block_visitor(pair, dim)
+    @ti.func
+    def update(i, xi, acc, F: ti.template(), keys):
+        theta, ew, ids, pos_out, theta_out, ew_out, prm, bad = ti.static(F)
+        finish(i, xi, ti.Vector([acc[a] for a in ti.static(range(dim))]), theta, ew, ids,
+               pos_out, theta_out, ew_out, prm, keys[0], keys[1], bad)
+
+    cell_pass = make_cell_pass(make_block_visitor(pair, dim), update, 4, "box", dim)
 
     @ti.kernel
     def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, ew_out: nd,
@@ -199,19 +205,8 @@ def block_step_kernel(inclusive: bool, move_new: bool, dim: int = 2):
              start: nd, cid: nd, gf: nd, gi: nd):
         G = ti.static((start, cid, gf, gi))
         for bucket in range(n_cells(G, "box", dim)):
-            c = cell_of(bucket, G, "box", dim)
-            i0 = start[bucket]
-            while i0 < start[bucket + 1]:
-                m = ti.min(start[bucket + 1] - i0, BLOCK_LANES)
-                Iv, X = load_block(pos, i0, m, dim)
-                acc = ti.Matrix.zero(float, BLOCK_LANES, 4)
-                visit_block(c, Iv, X, acc, pos, G, ti.static((ew, prm)))
-                for q in ti.static(range(BLOCK_LANES)):
-                    if q < m:
-                        finish(Iv[q], lane(X, q),
-                               ti.Vector([acc[q, a] for a in ti.static(range(dim))]),
-                               theta, ew, ids, pos_out, theta_out, ew_out, prm, key, key2,
-                               bad)
-                i0 += BLOCK_LANES
+            cell_pass(bucket, pos, G, ti.static((ew, prm)),
+                      ti.static((theta, ew, ids, pos_out, theta_out, ew_out, prm, bad)),
+                      ti.Vector([key, key2], dt=ti.u32))
 
     return step
