@@ -181,63 +181,62 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
     visit_block = make_sieved_visitor(sieve, pair, dim)
 
     def each(update):
-        """`update` for one cell's agents, by blocks, and for one agent alone."""
+        """`one(j, ...)`: `update` for the agents of cell j by blocks on the dense grid, else
+        for agent j alone; `extent` counts the j."""
+        if by_cells:
 
-        @ti.func
-        def block_update(i, xi, sums, F: ti.template(), unused):
-            vel, prm, nav, bad, OUT, OB = ti.static(F)
-            update(i, xi, row(vel, i, dim), sums, OUT, prm, nav, bad, OB)
+            @ti.func
+            def block_update(i, xi, sums, F: ti.template(), unused):
+                vel, prm, nav, bad, OUT, OB = ti.static(F)
+                update(i, xi, row(vel, i, dim), sums, OUT, prm, nav, bad, OB)
 
-        cell_pass = make_cell_pass(visit_block, block_update, dim + 1, "dense", dim)
+            cell_pass = make_cell_pass(visit_block, block_update, dim + 1, "dense", dim)
 
-        @ti.func
-        def cell(bucket, pos: ti.template(), vel: ti.template(), rad: ti.template(),
-                 prm: ti.template(), nav: ti.template(), bad: ti.template(), OUT: ti.template(),
-                 G: ti.template(), OB: ti.template()):
-            cell_pass(bucket, pos, G, ti.static((vel, rad, prm)),
-                      ti.static((vel, prm, nav, bad, OUT, OB)), ti.Vector([0]))
+            @ti.func
+            def one(bucket, pos: ti.template(), vel: ti.template(), rad: ti.template(),
+                    prm: ti.template(), nav: ti.template(), bad: ti.template(),
+                    OUT: ti.template(), G: ti.template(), OB: ti.template()):
+                cell_pass(bucket, pos, G, ti.static((vel, rad, prm)),
+                          ti.static((vel, prm, nav, bad, OUT, OB)), ti.Vector([0]))
+        else:
 
-        @ti.func
-        def agent(i, pos: ti.template(), vel: ti.template(), rad: ti.template(),
-                  prm: ti.template(), nav: ti.template(), bad: ti.template(), OUT: ti.template(),
-                  G: ti.template(), OB: ti.template()):
-            xi = row(pos, i, dim)
-            sums = visit(i, xi, ti.Vector.zero(float, dim + 1), pos, G,
-                         ti.static((vel, rad, prm)), False)
-            update(i, xi, row(vel, i, dim), sums, OUT, prm, nav, bad, OB)
+            @ti.func
+            def one(i, pos: ti.template(), vel: ti.template(), rad: ti.template(),
+                    prm: ti.template(), nav: ti.template(), bad: ti.template(),
+                    OUT: ti.template(), G: ti.template(), OB: ti.template()):
+                xi = row(pos, i, dim)
+                sums = visit(i, xi, ti.Vector.zero(float, dim + 1), pos, G,
+                             ti.static((vel, rad, prm)), False)
+                update(i, xi, row(vel, i, dim), sums, OUT, prm, nav, bad, OB)
 
-        return cell, agent
+        return one
 
-    euler_cell, euler_agent = each(euler_update)
-    accel_cell, accel_agent = each(accel_update)
+    @ti.func
+    def extent(pos: ti.template(), G: ti.template()):
+        m = pos.shape[0]
+        if ti.static(by_cells):
+            m = n_cells(G, "dense", dim)
+        return m
+
+    euler_one, accel_one = each(euler_update), each(accel_update)
 
     @ti.kernel
     def euler(pos: nd, vel: nd, rad: nd, pos_out: nd, vel_out: nd, prm: nd, nav: nd, bad: nd,
               start: nd, cid: nd, gf: nd, gi: nd,
               opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
         G = ti.static((start, cid, gf, gi))
-        args = ti.static((pos, vel, rad, prm, nav, bad, (pos_out, vel_out), G,
-                          (opos, orad, ostart, ocid, ogf, ogi)))
-        if ti.static(by_cells):
-            for bucket in range(n_cells(G, "dense", dim)):
-                euler_cell(bucket, *args)
-        else:
-            for i in range(pos.shape[0]):
-                euler_agent(i, *args)
+        for j in range(extent(pos, G)):
+            euler_one(j, pos, vel, rad, prm, nav, bad, (pos_out, vel_out), G,
+                      (opos, orad, ostart, ocid, ogf, ogi))
 
     @ti.kernel
     def accel(pos: nd, vel: nd, rad: nd, acc_out: nd, prm: nd, nav: nd, bad: nd,
               start: nd, cid: nd, gf: nd, gi: nd,
               opos: nd, orad: nd, ostart: nd, ocid: nd, ogf: nd, ogi: nd):
         G = ti.static((start, cid, gf, gi))
-        args = ti.static((pos, vel, rad, prm, nav, bad, (acc_out,), G,
-                          (opos, orad, ostart, ocid, ogf, ogi)))
-        if ti.static(by_cells):
-            for bucket in range(n_cells(G, "dense", dim)):
-                accel_cell(bucket, *args)
-        else:
-            for i in range(pos.shape[0]):
-                accel_agent(i, *args)
+        for j in range(extent(pos, G)):
+            accel_one(j, pos, vel, rad, prm, nav, bad, (acc_out,), G,
+                      (opos, orad, ostart, ocid, ogf, ogi))
 
     return euler, accel
 
