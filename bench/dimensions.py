@@ -3,6 +3,7 @@
     python -m bench.dimensions                       # Vicsek, float64 and float32, 10^6
     python -m bench.dimensions --models vicsek flocking formation --precision float64
     python -m bench.dimensions --n 100000 --steps 10
+    python -m bench.dimensions --rounds 3            # 2D, 3D, 2D, 3D, ...: a ratio a round
 
 Vicsek: density 4, r = 1 strict, full noise, v0 = 0.5 (the hand-written peer kernel's
 workload; bench/peer.py runs the peer beside it).
@@ -17,12 +18,17 @@ run, which cancels set-up: meant for N >= 10^5, where the steps dominate. Each (
 dimension, precision) runs in a fresh process; its memory is counted as bench/bench.py
 counts it (bench/memory.py): the peak resident memory of one 5-step run at N, less that of
 the process warmed at 20000 agents (imports, Taichi, compiled kernels), divided by N.
+
+On a shared machine a single rate drifts by 10-20 % from one minute to the next, so a
+ratio of two processes run a minute apart carries that drift: `--rounds K` runs the pair
+(2D, then 3D) K times in turn and prints each round's ratio and their median.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import subprocess
 import sys
 import time
@@ -112,6 +118,15 @@ def one(label: str, n: int, dim: int, steps: int, precision: str) -> dict:
             "bytes_per_agent": round(per_agent)}
 
 
+def run_one(label: str, dim: int, precision: str, n: int, steps: int) -> dict:
+    """`one` in a fresh process: its JSON line."""
+    out = subprocess.run(
+        [sys.executable, "-m", "bench.dimensions", "--one", label, str(dim), precision,
+         "--n", str(n), "--steps", str(steps)],
+        capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--models", nargs="+", choices=list(MODELS), default=["vicsek"])
@@ -119,6 +134,8 @@ def main(argv: list[str] | None = None) -> int:
                     default=["float64", "float32"])
     ap.add_argument("--n", type=int, default=1_000_000)
     ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--rounds", type=int, default=1,
+                    help="run the 2D and 3D processes this many times in turn")
     ap.add_argument("--one", nargs=3, metavar=("LABEL", "DIM", "PRECISION"),
                     help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -129,18 +146,21 @@ def main(argv: list[str] | None = None) -> int:
     for precision in args.precision:
         for model in args.models:
             for label, _ in MODELS[model]:
-                rates = {}
-                for dim in (2, 3):
-                    out = subprocess.run(
-                        [sys.executable, "-m", "bench.dimensions", "--one", label, str(dim),
-                         precision, "--n", str(args.n), "--steps", str(args.steps)],
-                        capture_output=True, text=True, check=True)
-                    line = json.loads(out.stdout.strip().splitlines()[-1])
-                    rates[dim] = line.get("agent_steps_per_s")
-                    print(json.dumps(line), flush=True)
-                if (rates[2] or 0) > 0 and (rates[3] or 0) > 0:
+                ratios = []
+                for k in range(args.rounds):
+                    rates = {}
+                    for dim in (2, 3):
+                        line = run_one(label, dim, precision, args.n, args.steps)
+                        rates[dim] = line.get("agent_steps_per_s")
+                        print(json.dumps(dict(line, round=k + 1)), flush=True)
+                    if (rates[2] or 0) > 0 and (rates[3] or 0) > 0:
+                        ratios.append(round(rates[3] / rates[2], 2))
+                        print(json.dumps({"model": label, "precision": precision, "round": k + 1,
+                                          "ratio_3d_to_2d": ratios[-1]}), flush=True)
+                if len(ratios) > 1:
                     print(json.dumps({"model": label, "precision": precision,
-                                      "ratio_3d_to_2d": round(rates[3] / rates[2], 2)}),
+                                      "ratios_3d_to_2d": ratios,
+                                      "median_ratio_3d_to_2d": statistics.median(ratios)}),
                           flush=True)
     return 0
 
