@@ -1,6 +1,8 @@
 """The fused small-N path of M2 and M3 (kernels/models/flocking/fused.py): a replica gives the
 same bits alone, in a batch, cut into any windows, and the same prefix when cancelled; it
-agrees with the per-step path; the engine picks the path from the scenario alone.
+agrees with the per-step path; the engine picks the path from the scenario alone. M2 in 2D
+and 3D (all pairs, the 3x3x3 cells, hashed buckets); M3 in 2D (3D M3 takes the per-step
+path).
 
 (The family runs on the plane only, so there is no periodic case.)"""
 
@@ -11,6 +13,8 @@ from flocklab import kernels
 from flocklab.kernels import engine
 from flocklab.kernels.models.flocking import fused as flocking_fused
 from flocklab.schemas import Scenario
+from tests.test_flocking_3d import lattice_3d, two_clusters_3d
+from tests.test_flocking_3d import m3_scenario as m3_scenario_3d
 from tests.test_flocking_reference import lattice, m2_scenario, m3_scenario
 
 
@@ -33,6 +37,15 @@ def with_recording(sc: Scenario, **recording) -> Scenario:
 
 def obstacles_world(n: int, seed: int, **model) -> Scenario:
     return m3_scenario(n=n, steps=60, seed=seed, **model)
+
+
+def in_3d(sc: Scenario, initial: dict | None = None) -> Scenario:
+    """The scenario in 3D: a jittered cubic lattice (spacing as m2_scenario's default) unless
+    `initial` is given."""
+    spec = sc.model_dump(mode="json")
+    spec["space"]["dimension"] = 3
+    spec["initial"] = initial or lattice_3d(sc.n_agents, 1.1, sc.seed)
+    return Scenario.model_validate(spec)
 
 
 def sprawling(n: int = 70) -> Scenario:
@@ -62,6 +75,21 @@ MIXES = {
         m2_scenario(n=70, steps=25, seed=4, search="all_pairs"),
         sprawling(),
     ],
+    "fixed-3d": [
+        in_3d(m2_scenario("fixed", n=10, steps=40, graph={"kind": "ring"})),
+        in_3d(m2_scenario("fixed", n=80, steps=30, seed=2)),
+        with_recording(in_3d(m2_scenario("fixed", n=30, steps=33, graph={"kind": "complete"},
+                                         dt=0.005)), observables_every=4),
+    ],
+    # 216 agents over a 6x6x6 lattice: 4x4x4 cells; 70 in two clusters 1000 apart: hashed.
+    "switching-3d": [
+        in_3d(m2_scenario(n=10, steps=40)),
+        in_3d(m2_scenario(n=216, steps=30, seed=2, R=1.8)),
+        with_recording(in_3d(m2_scenario(n=40, steps=37, seed=3, R=1.6, inclusive=True,
+                                         search="grid")), observables_every=3),
+        in_3d(m2_scenario(n=70, steps=25, seed=4, search="all_pairs")),
+        in_3d(m2_scenario(n=70, steps=20), initial=two_clusters_3d(70, 1000.0, 6)),
+    ],
     "mission": [
         obstacles_world(5, 1),
         obstacles_world(90, 2, neighbour_search="auto", kappa=2.0),
@@ -90,11 +118,17 @@ def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, mode):
         same_result(res, kernels.run(sc))
 
 
-@pytest.mark.parametrize("mode", list(MIXES))
-def test_the_fused_path_agrees_with_the_per_step_path(taichi_cpu, monkeypatch, mode):
+# The largest scenario of each mix (cells, obstacles, lambda_2 by eigsh), and 3D's hashed
+# buckets.
+AGREEMENT = {mode: max(mix, key=lambda s: s.n_agents) for mode, mix in MIXES.items()}
+AGREEMENT["switching-3d-hashed"] = MIXES["switching-3d"][-1]
+
+
+@pytest.mark.parametrize("case", list(AGREEMENT))
+def test_the_fused_path_agrees_with_the_per_step_path(taichi_cpu, monkeypatch, case):
     """Every observable, the extras and the frames, to rounding (the summation order
-    differs): the largest scenario of each mix (cells, obstacles, lambda_2 by eigsh)."""
-    sc = with_recording(max(MIXES[mode], key=lambda s: s.n_agents), every=10)
+    differs)."""
+    sc = with_recording(AGREEMENT[case], every=10)
     fused_sink, step_sink = Frames(), Frames()
     fused = kernels.run(sc, sink=fused_sink)
     monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
@@ -113,14 +147,15 @@ def test_the_fused_path_agrees_with_the_per_step_path(taichi_cpu, monkeypatch, m
             np.testing.assert_allclose(f[k], g[k], rtol=1e-9, atol=1e-12, err_msg=k)
 
 
+@pytest.mark.parametrize("mode", ["switching", "switching-3d"])
 def test_windows_frames_and_snapshot_launches_do_not_change_a_bit(taichi_cpu, monkeypatch,
-                                                                    fixed_windows):
-    sc = MIXES["switching"][1]  # N = 100 in cells; lambda_2 from snapshots
+                                                                    fixed_windows, mode):
+    sc = MIXES[mode][1]  # N = 100 (216 in 3D) in cells; lambda_2 from snapshots
     whole = kernels.run(sc)
     sink = Frames()
     framed = kernels.run(with_recording(sc, every=7), sink=sink)
     assert sink.steps == [*range(0, 30, 7), 30]
-    fixed_windows(100 * 3)  # windows of 3 steps
+    fixed_windows(sc.n_agents * 3)  # windows of 3 steps
     cut = kernels.run(sc)
     monkeypatch.setattr(flocking_fused, "SNAP_DOUBLES", 1)  # lambda_2 every launch of 1 step
     snapped = kernels.run(sc)
@@ -167,15 +202,26 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     mixed = [euler, rk4, MIXES["fixed"][0], euler, MIXES["mission"][0]]
     assert sorted(map(sorted, engine._batches(mixed))) == [[0, 3], [1], [2], [4]]
     assert kernels.run(rk4).extra["engine_path"] == "per_step"
+    # 3D: M2 fused (its own launches, apart from 2D), M3 on the per-step path
+    flat = MIXES["switching"][0]
+    deep = MIXES["switching-3d"][0]
+    assert engine.fused_batch(deep, "cpu") is flocking_fused.FlockingBatch
+    assert engine.fused_batch(MIXES["fixed-3d"][0], "cpu") is flocking_fused.FlockingBatch
+    assert engine.fused_batch(m3_scenario_3d(steps=1), "cpu") is None
+    assert sorted(map(sorted, engine._batches([flat, deep, flat, deep]))) == [[0, 2], [1, 3]]
+    assert kernels.run(m3_scenario_3d(steps=1)).extra["engine_path"] == "per_step"
 
 
-def test_a_runaway_swarm_is_reported_as_the_per_step_path_reports_it(taichi_cpu, monkeypatch):
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_runaway_swarm_is_reported_as_the_per_step_path_reports_it(taichi_cpu, monkeypatch,
+                                                                      dim):
     """A pair 1e-6 apart is blown 4e14 apart in one step: the cell list refuses a swarm
-    over 2^30 radii wide, at the same step and in the same words on both paths."""
-    init = lattice(80, 1.1, 3)
-    init["positions"][1] = [init["positions"][0][0] + 1e-6, init["positions"][0][1]]
+    over 2^30 (in 3D 2^20) radii wide, at the same step and in the same words on both
+    paths."""
+    init = lattice(80, 1.1, 3) if dim == 2 else lattice_3d(80, 1.1, 3)
+    init["positions"][1] = [init["positions"][0][0] + 1e-6, *init["positions"][0][1:]]
     sc = Scenario.model_validate({
-        "model": {"kind": "flocking"}, "space": {"kind": "plane"},
+        "model": {"kind": "flocking"}, "space": {"kind": "plane", "dimension": dim},
         "neighbours": {"radius": 2.0}, "initial": init, "time": {"steps": 20, "dt": 0.01},
     })
     fused = kernels.run(sc)
@@ -183,4 +229,5 @@ def test_a_runaway_swarm_is_reported_as_the_per_step_path_reports_it(taichi_cpu,
     per_step = kernels.run(sc)
     assert fused.extra["engine_path"] == "fused" and fused.status == "diverged"
     assert fused.error == per_step.error
-    assert fused.error["step"] == 1 and "2^30 neighbour radii" in fused.error["cause"]
+    limit = 30 if dim == 2 else 20
+    assert fused.error["step"] == 1 and f"2^{limit} neighbour radii" in fused.error["cause"]

@@ -11,15 +11,22 @@ any windows.
 Per replica and step s (state X(s) = (r, v[, R_i]) in agent-id order), semi-implicit
 Euler:
   1. switching/M3: a cell list of r(s) over its bounding box (cells of side R, the initial
-     radius, which bounds every R_i; a stable counting sort, so every sum has one fixed
-     order; hashed buckets of the same cells when the box needs over 4 N + 16 of them), or
-     all pairs when `neighbour_search` says so ("auto": N <= 64) or the box is under three
-     cells across; the slot-order copy of X(s) is what every visit reads;
+     radius, which bounds every R_i, numbered x fastest, then y, then z; a stable counting
+     sort, so every sum has one fixed order; hashed buckets of the same cells when the box
+     needs over 4 N + 16 of them), or all pairs when `neighbour_search` says so ("auto":
+     N <= 64) or the box is under three cells across every way; the slot-order copy of
+     X(s) is what every visit reads (the 3x3, in 3D 3x3x3, cells around an agent);
   2. on an observation step, the observables of X(s) (one more visit: valencies, the
      union-find of the graph, the saturated potential, the closest pair);
   3. M3 at s > 0, s % radius_every == 0: the adaptive radius of eq. 4, synchronously;
   4. u_i of eq. 3 (and paper 002's -grad V_i - c_d v_i), v' = v + dt u, r' = r + dt v'.
      A non-finite value stops the replica and records the step.
+M2 runs in 2D and 3D: the dimension `dim` is a compile-time parameter of the kernel (the law
+needs only |r_ij| and the vectors r_ij, v_ij, as in forces.py), and 2D compiles to the
+arithmetic it had before 3D. The 3D heading spread is the per-step path's (observe.py):
+twice the largest angle between a velocity's direction and the mean direction.
+M3 stays 2D here (its navigation function and obstacle grid are planar): `batch_key` sends
+a 3D M3 scenario to the per-step path.
 The mission potential folds the obstacles of the 3x3 cells of a per-replica obstacle grid
 (cells of side obstacle_range + the largest disc radius, as kernels/models/flocking/navigation.py).
 
@@ -30,7 +37,7 @@ eigvalsh at N <= 32). A window holding more observations than the buffer is cut 
 several launches, which never changes a bit.
 
 Not on this path (`FlockingBatch.batch_key` returns None; the per-step path runs them):
-the `rk4` integrator, and M3's `radius_rule: "min"`.
+the `rk4` integrator, M3's `radius_rule: "min"`, and M3 in 3D.
 """
 
 from functools import cache
@@ -46,6 +53,7 @@ from ...batch import FusedBatch
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
 from ...space.grid import max_cells_across, runaway_cause, widen
+from ...space.initial import unit_rows
 from ...space.params import Slots
 from . import observe as fo
 from . import potentials
@@ -73,24 +81,54 @@ OBS = ("step", "mean_velocity_x", "mean_velocity_y", "velocity_disagreement",
        "min_distance", "min_pair_i", "min_pair_j", "destination_distance_mean",
        "destination_distance_max", "inside_vmin_fraction", "mission_potential_max",
        "obstacle_distance_min", "radius_min", "radius_mean", "radius_max",
-       "velocity_disagreement_components", "velocity_disagreement_components_max")
+       "velocity_disagreement_components", "velocity_disagreement_components_max",
+       "mean_velocity_z")
 COL = {name: k for k, name in enumerate(OBS)}
 N_OBS = len(OBS)
-VELOCITY_KEYS = OBS[1:9]
-MISSION_KEYS = OBS[18:]
+MISSION_KEYS = OBS[18:28]
+
+
+def velocity_keys(dim: int) -> list[str]:
+    """The velocity observables in the per-step path's order (observe.velocity_stats)."""
+    means = [f"mean_velocity_{c}" for c in "xyz"[:dim]]
+    return [*means, *OBS[3:9]]
+
+
+def columns(dim: int) -> tuple[int, int, int, int, int]:
+    """ps's columns (position, velocity, R_i, hashed cell, width): r and v and the hashed
+    cell take dim columns each; in 2D the layout it had before 3D."""
+    return 0, dim, 2 * dim, 2 * dim + 1, 3 * dim + 1
 
 
 # Vectors of the runtime's float type: built at compile time (`float` is Taichi's
 # default_fp then), where a module-level ti.types.vector would fix the type at import.
 @ti.func
-def Grid(nx, ny, w, x0, y0, extent):
-    """(cells across, cells down, width, x0, y0, extent)."""
-    return ti.Vector([nx, ny, w, x0, y0, extent], dt=float)
+def Acc5(a, b, c, d, e):
+    return ti.Vector([a, b, c, d, e], dt=float)
 
 
 @ti.func
-def Acc5(a, b, c, d, e):
-    return ti.Vector([a, b, c, d, e], dt=float)
+def _full(x, dim: ti.template()):
+    """The dim-vector (x, ..., x) of the float type."""
+    return ti.Vector([x for _ in ti.static(range(dim))], dt=float)
+
+
+@ti.func
+def _row(a: ti.template(), i, c0: ti.template(), dim: ti.template()):
+    """Columns c0 .. c0 + dim of row i of a, as a dim-vector of the float type."""
+    return ti.Vector([a[i, c0 + c] for c in ti.static(range(dim))], dt=float)
+
+
+@ti.func
+def _put(a: ti.template(), i, x):
+    """Row i of the (rows, dim) array a = the dim-vector x."""
+    for c in ti.static(range(x.n)):
+        a[i, c] = x[c]
+
+
+# build_cells' grid vector: cells across each way (nz = 1 in 2D; nx = 0: all pairs, -1: the
+# swarm ran away; hashed: nx = bucket count, ny = -1), cell side, extent, then the origin.
+G_NX, G_NY, G_NZ, G_W, G_SPAN, G_O = range(6)
 
 
 @ti.func
@@ -102,15 +140,29 @@ def _within(s2, r2, incl):
 @ti.func
 def _nonfinite(x, v):
     s = x[0] + x[1] + v[0] + v[1]  # NaN if any term is NaN or infinite
+    if ti.static(x.n == 3):
+        s += x[2] + v[2]
     return ti.cast(ti.math.isnan(s) or ti.math.isinf(s), ti.i32)
 
 
 @ti.func
-def _bucket(cx, cy, nb):
-    """The hashed bucket of cell (cx, cy) among nb (as kernels/space/grid.py's plane buckets)."""
-    h = (ti.cast(cx, ti.u32) * ti.u32(73856093)) ^ (ti.cast(cy, ti.u32) * ti.u32(19349663))
+def _bucket(c, nb):
+    """The hashed bucket of the integer cell c among nb (as kernels/space/grid.py's
+    buckets: the 3D hash adds Teschner et al.'s third prime)."""
+    h = (ti.cast(c[0], ti.u32) * ti.u32(73856093)) ^ (ti.cast(c[1], ti.u32) * ti.u32(19349663))
+    if ti.static(c.n == 3):
+        h ^= ti.cast(c[2], ti.u32) * ti.u32(83492791)
     h ^= h >> ti.u32(13)
     return ti.cast(h % ti.cast(nb, ti.u32), ti.i32)
+
+
+@ti.func
+def _cells_for(ext, w):
+    """Cells of side w over a box of extent ext: prod (ext / w + 1) (a float: no overflow)."""
+    cells = (ext[0] / w + 1.0) * (ext[1] / w + 1.0)
+    if ti.static(ext.n == 3):
+        cells *= ext[2] / w + 1.0
+    return cells
 
 
 _cell_sort, _in_id_order = make_cell_sort()
@@ -118,35 +170,40 @@ _cell_sort, _in_id_order = make_cell_sort()
 
 @ti.func
 def build_cells(a0, n, c0, cap, w0, src: ti.template(), may_hash: ti.template(),
-                cell: ti.template(), cstart: ti.template(), cidx: ti.template()):
-    """Cell list of the replica's agents at src (id order, rows a0 .. a0 + n): cidx[a0 + k]
-    is the agent in slot k, slots in cell order and, within a cell, in id order (a stable
-    counting sort); cell c holds slots cstart[c0 + c] .. cstart[c0 + c + 1]. Cells of side
-    w0 numbered row by row over the bounding box while that fits the replica's budget of
-    `cap` cells; a sprawling swarm (a pair blown apart by the 1/s^2 repulsion, say) gets
-    `cap` hashed buckets of the same cells (may_hash), or cells widened until they fit.
-    Returns Grid: cells across = 0: under three cells each way (visit all pairs), -1: the
-    swarm ran away (or NaN); hashed: (cap, -1)."""
-    lo = ti.math.vec2(ti.math.inf)
-    hi = ti.math.vec2(-ti.math.inf)
+                dim: ti.template(), cell: ti.template(), cstart: ti.template(),
+                cidx: ti.template()):
+    """Cell list of the replica's agents at src (id order, rows a0 .. a0 + n, positions in
+    columns 0 .. dim): cidx[a0 + k] is the agent in slot k, slots in cell order and,
+    within a cell, in id order (a stable counting sort); cell c holds slots
+    cstart[c0 + c] .. cstart[c0 + c + 1]. Cells of side w0 numbered x fastest, then y, then
+    z, over the bounding box while that fits the replica's budget of `cap` cells; a
+    sprawling swarm (a pair blown apart by the 1/s^2 repulsion, say) gets `cap` hashed
+    buckets of the same cells (may_hash), or cells widened until they fit. Returns the
+    grid vector (G_NX ...): cells across = 0 when under three cells every way (visit all
+    pairs), -1 when the swarm ran away (or NaN); hashed: (cap, -1)."""
+    lo = _full(ti.math.inf, dim)
+    hi = _full(-ti.math.inf, dim)
     for i in range(a0, a0 + n):
-        p = ti.math.vec2(src[i, 0], src[i, 1])
+        p = _row(src, i, 0, dim)
         lo = ti.min(lo, p)
         hi = ti.max(hi, p)
     ext = hi - lo
     w = w0
     nx = 0
     ny = 0
+    nz = 1
     hashed = 0
     span = ti.max(ext[0], ext[1])
-    if not (span < ti.static(max_cells_across()) * w):  # NaN included
+    if ti.static(dim == 3):
+        span = ti.max(span, ext[2])
+    if not (span < ti.static(max_cells_across(dim)) * w):  # NaN included
         nx = -1
     if nx == 0:
-        if (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
+        if _cells_for(ext, w) > cap:
             if ti.static(may_hash):
                 hashed = 1
             else:
-                while (ext[0] / w + 1.0) * (ext[1] / w + 1.0) > cap:
+                while _cells_for(ext, w) > cap:
                     w *= 2.0
         if hashed:
             nx = cap
@@ -154,67 +211,89 @@ def build_cells(a0, n, c0, cap, w0, src: ti.template(), may_hash: ti.template(),
         else:
             nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
             ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
-            if nx < 3 and ny < 3:
+            if ti.static(dim == 3):
+                nz = ti.cast(ti.floor(ext[2] / w), ti.i32) + 1
+            if nx < 3 and ny < 3 and nz < 3:
                 nx = 0
     if nx > 0:
-        nb = nx * ny
+        nb = nx * ny * nz
         if hashed:
             nb = cap
         clear_cells(c0, nb, cstart)
         for i in range(a0, a0 + n):
-            cx = ti.cast(ti.floor((src[i, 0] - lo[0]) / w), ti.i32)
-            cy = ti.cast(ti.floor((src[i, 1] - lo[1]) / w), ti.i32)
+            c = ti.Vector([ti.cast(ti.floor((src[i, a] - lo[a]) / w), ti.i32)
+                           for a in ti.static(range(dim))])
             cc = 0
             if hashed:
-                cc = _bucket(cx, cy, nb)
+                cc = _bucket(c, nb)
             else:
-                cc = ti.max(ti.min(cx, nx - 1), 0) + nx * ti.max(ti.min(cy, ny - 1), 0)
+                cc = ti.max(ti.min(c[0], nx - 1), 0) + nx * ti.max(ti.min(c[1], ny - 1), 0)
+                if ti.static(dim == 3):
+                    cc += nx * ny * ti.max(ti.min(c[2], nz - 1), 0)
             cell[i] = cc
             cstart[c0 + cc + 1] = cstart[c0 + cc + 1] + 1
         _cell_sort(a0, n, c0, nb, cell, cstart, cidx, ())
     elif nx == 0:
         _in_id_order(a0, n, cidx, ())
-    return Grid(nx, ny, w, lo[0], lo[1], span)
+    return ti.Vector([nx, ny, nz, w, span] + [lo[a] for a in ti.static(range(dim))],
+                     dt=float)
 
 
-def make_visit(pair):
+def make_visit(pair, dim: int, by_id: bool = False):
     """visit(k, ...) folding acc = pair(k, m, d, acc, q, ps, S) over slot k's candidates,
-    d = r_m - r_k: every slot of the replica (cells across = 0), the 3x3 cells around
-    slot k read as three contiguous rows of slots, or (hashed, ny < 0) the buckets of the
-    3x3 cells, each slot checked against its exact cell (ps columns 5, 6)."""
+    d = r_m - r_k: every slot of the replica (cells across = 0), the 3x3 (3x3x3) cells
+    around slot k read as rows of slots contiguous along x, z outermost, or (hashed,
+    ny < 0) the buckets of those cells, each slot checked against its exact cell (ps's
+    hashed-cell columns). by_id: ps in id order (rows cidx[k]), and pair gets the rows."""
+    X, _, _, HC, _ = columns(dim)
+    zr = 1 if dim == 3 else 0  # the planes around slot k's: -zr .. zr
 
     @ti.func
-    def visit(k, a0, n, c0, nx, ny, acc, q, ps: ti.template(), cell: ti.template(),
+    def at(k, cidx: ti.template()):
+        r = k
+        if ti.static(by_id):
+            r = cidx[k]
+        return r
+
+    @ti.func
+    def visit(k, a0, n, c0, nx, ny, nz, acc, q, ps: ti.template(), cell: ti.template(),
               cstart: ti.template(), cidx: ti.template(), S: ti.template()):
-        xk = ti.math.vec2(ps[k, 0], ps[k, 1])
+        ik = at(k, cidx)
+        xk = _row(ps, ik, X, dim)
         if nx == 0:
             for m in range(a0, a0 + n):
-                d = ti.math.vec2(ps[m, 0] - xk[0], ps[m, 1] - xk[1])
-                acc = pair(k, m, d, acc, q, ps, S)
+                j = at(m, cidx)
+                acc = pair(ik, j, _row(ps, j, X, dim) - xk, acc, q, ps, S)
         elif ny < 0:
-            cx = ps[k, 5]
-            cy = ps[k, 6]
-            for t in range(9):  # a runtime loop, not unrolled: less to compile
-                dx = t % 3 - 1
-                dy = t // 3 - 1
-                bk = c0 + _bucket(ti.cast(cx, ti.i32) + dx, ti.cast(cy, ti.i32) + dy, nx)
+            hc = _row(ps, ik, HC, dim)
+            for t in range(3**dim):  # a runtime loop, not unrolled: less to compile
+                off = ti.Vector([t % 3 - 1, t // 3 % 3 - 1, t // 9 - 1])
+                c = ti.Vector([ti.cast(hc[a], ti.i32) + off[a] for a in ti.static(range(dim))])
+                bk = c0 + _bucket(c, nx)
                 for m in range(a0 + cstart[bk], a0 + cstart[bk + 1]):
-                    if ps[m, 5] == cx + dx and ps[m, 6] == cy + dy:
-                        d = ti.math.vec2(ps[m, 0] - xk[0], ps[m, 1] - xk[1])
-                        acc = pair(k, m, d, acc, q, ps, S)
+                    j = at(m, cidx)
+                    same = True
+                    for a in ti.static(range(dim)):
+                        same = same and ps[j, HC + a] == hc[a] + off[a]
+                    if same:
+                        acc = pair(ik, j, _row(ps, j, X, dim) - xk, acc, q, ps, S)
         else:
             cc = cell[cidx[k]]
             cx = cc % nx
-            cy = cc // nx
+            cy = cc // nx % ny
+            cz = cc // (nx * ny)
             xlo = ti.max(cx - 1, 0)
             xhi = ti.min(cx + 1, nx - 1)
-            for dy in range(-1, 2):
-                row = cy + dy
-                if row >= 0 and row < ny:
-                    base = c0 + row * nx
-                    for m in range(a0 + cstart[base + xlo], a0 + cstart[base + xhi + 1]):
-                        d = ti.math.vec2(ps[m, 0] - xk[0], ps[m, 1] - xk[1])
-                        acc = pair(k, m, d, acc, q, ps, S)
+            for dz in range(-zr, zr + 1):
+                plane = cz + dz
+                if plane >= 0 and plane < nz:
+                    for dy in range(-1, 2):
+                        row = cy + dy
+                        if row >= 0 and row < ny:
+                            base = c0 + (plane * ny + row) * nx
+                            for m in range(a0 + cstart[base + xlo], a0 + cstart[base + xhi + 1]):
+                                j = at(m, cidx)
+                                acc = pair(ik, j, _row(ps, j, X, dim) - xk, acc, q, ps, S)
         return acc
 
     return visit
@@ -312,13 +391,44 @@ def heading_spread(a0, n, ps: ti.template(), lo: ti.template(), hi: ti.template(
 
 
 @ti.func
-def velocity_stats(row, a0, n, ps: ti.template(), lo: ti.template(), hi: ti.template(),
-                   obs: ti.template()):
-    """The columns of VELOCITY_KEYS for the state in ps (velocity in columns 2, 3);
-    returns the kinetic energy 1/2 sum |v|^2."""
-    m = ti.math.vec2(0.0)
+def _direction(v):
+    """v over its length; a zero velocity counts as the x axis (observe._unit)."""
+    sp = ti.sqrt(v.dot(v))
+    e = ti.Vector.unit(3, 0, float)
+    if sp > 0.0:
+        e = v / sp
+    return e
+
+
+@ti.func
+def heading_spread_3d(a0, n, ps: ti.template()):
+    """Twice the largest angle between a velocity's direction and the mean direction (the
+    normalised sum of the directions), 2 pi when that sum is zero (observe.velocity_stats:
+    3D headings have no circular order)."""
+    V = ti.static(columns(3)[1])
+    s = ti.Vector.zero(float, 3)
     for k in range(a0, a0 + n):
-        m += ti.math.vec2(ps[k, 2], ps[k, 3])
+        s += _direction(_row(ps, k, V, 3))
+    norm = ti.sqrt(s.dot(s))
+    res = TWO_PI
+    if norm > 0.0:
+        axis = s / norm
+        cmin = ti.math.inf
+        for k in range(a0, a0 + n):
+            cmin = ti.min(cmin, _direction(_row(ps, k, V, 3)).dot(axis))
+        res = 2.0 * ti.acos(ti.max(ti.min(cmin, 1.0), -1.0))
+    return res
+
+
+@ti.func
+def velocity_stats(row, a0, n, ps: ti.template(), lo: ti.template(), hi: ti.template(),
+                   obs: ti.template(), dim: ti.template()):
+    """The columns of velocity_keys(dim) for the state in ps (velocity in columns dim ..
+    2 dim); returns the kinetic energy 1/2 sum |v|^2."""
+    V = ti.static(columns(dim)[1])
+    m = _full(0.0, dim)
+    for k in range(a0, a0 + n):
+        m += _row(ps, k, V, dim)
     m /= n
     dev = 0.0
     dmax = 0.0
@@ -327,7 +437,7 @@ def velocity_stats(row, a0, n, ps: ti.template(), lo: ti.template(), hi: ti.temp
     ssum = 0.0
     kin = 0.0
     for k in range(a0, a0 + n):
-        v = ti.math.vec2(ps[k, 2], ps[k, 3])
+        v = _row(ps, k, V, dim)
         e = v - m
         d2 = e.dot(e)
         dev += d2
@@ -338,28 +448,34 @@ def velocity_stats(row, a0, n, ps: ti.template(), lo: ti.template(), hi: ti.temp
         smin = ti.min(smin, sp)
         smax = ti.max(smax, sp)
         ssum += sp
-    obs[row, 1] = m[0]
-    obs[row, 2] = m[1]
-    obs[row, 3] = dev
-    obs[row, 4] = ti.sqrt(dmax)
-    obs[row, 5] = smin
-    obs[row, 6] = ssum / n
-    obs[row, 7] = smax
-    obs[row, 8] = heading_spread(a0, n, ps, lo, hi)
+    for c in ti.static(range(dim)):
+        obs[row, ti.static(COL["mean_velocity_" + "xyz"[c]])] = m[c]
+    obs[row, COL["velocity_disagreement"]] = dev
+    obs[row, COL["velocity_disagreement_max"]] = ti.sqrt(dmax)
+    obs[row, COL["speed_min"]] = smin
+    obs[row, COL["speed_mean"]] = ssum / n
+    obs[row, COL["speed_max"]] = smax
+    if ti.static(dim == 3):
+        obs[row, COL["heading_spread"]] = heading_spread_3d(a0, n, ps)
+    else:
+        obs[row, COL["heading_spread"]] = heading_spread(a0, n, ps, lo, hi)
     return 0.5 * kin
 
 
 @cache
-def advance_kernel(mode: int):
-    """The window kernel for one mode: fixed graph, switching (M2) or mission (M3)."""
+def advance_kernel(mode: int, dim: int = 2):
+    """The window kernel for one mode (fixed graph, switching (M2) or mission (M3)) and
+    dimension (M3: 2 only)."""
     fixed = mode == MODES["fixed"]
     mission = mode == MODES["mission"]
+    assert dim == 2 or not mission, "M3's fused kernel is planar"
+    X, V, RAD, HC, _ = columns(dim)
 
     @ti.func
     def pair_radius2(k, q, ps: ti.template()):
         r2 = q[0]
         if ti.static(mission):  # paper 002 eq. 4 as printed: R_ij = R_i ("own")
-            r2 = ps[k, 4] * ps[k, 4]
+            r2 = ps[k, RAD] * ps[k, RAD]
         return r2
 
     @ti.func
@@ -372,12 +488,13 @@ def advance_kernel(mode: int):
         w = ti.cast(_within(s2, r2, ti.cast(q[1], ti.i32)) & other, float)
         f = ti.select((ti.cast(s2 < r2, ti.i32) & other) != 0,
                       potentials.force_factor(s2, q[2]), 0.0)
-        return acc + ti.math.vec3(w * ps[m, 2] + f * d[0], w * ps[m, 3] + f * d[1], w)
+        t = ti.Vector([w * ps[m, V + c] + f * d[c] for c in ti.static(range(dim))] + [w])
+        return acc + t
 
     @ti.func
     def radius_pair(k, m, d, acc, q, ps: ti.template(), S: ti.template()):
         if m != k and _within(d.dot(d), pair_radius2(k, q, ps), ti.cast(q[1], ti.i32)):
-            acc = ti.max(acc, ps[m, 4])
+            acc = ti.max(acc, ps[m, RAD])
         return acc
 
     @ti.func
@@ -400,9 +517,19 @@ def advance_kernel(mode: int):
                 acc[4] += 1.0
         return acc
 
-    visit_force = make_visit(force_pair)
-    visit_radius = make_visit(radius_pair)
-    visit_observe = make_visit(observe_pair)
+    @ti.func
+    def closest_pair(k, m, d, acc, q, ps: ti.template(), S: ti.template()):
+        """acc = (d^2, row, row) of the closest pair so far."""
+        if m != k:
+            s2 = d.dot(d)
+            if s2 < acc[0]:
+                acc = ti.math.vec3(s2, k, m)
+        return acc
+
+    visit_force = make_visit(force_pair, dim)
+    visit_radius = make_visit(radius_pair, dim)
+    visit_observe = make_visit(observe_pair, dim)
+    visit_closest = make_visit(closest_pair, dim, by_id=True)
 
     @ti.func
     def closest_all_pairs(a0, n, ps: ti.template()):
@@ -410,7 +537,7 @@ def advance_kernel(mode: int):
         best = ti.math.vec3(NEAREST_NONE, a0, a0)
         for k in range(a0, a0 + n):
             for m in range(k + 1, a0 + n):
-                d = ti.math.vec2(ps[m, 0] - ps[k, 0], ps[m, 1] - ps[k, 1])
+                d = _row(ps, m, X, dim) - _row(ps, k, X, dim)
                 s2 = d.dot(d)
                 if s2 < best[0]:
                     best = ti.math.vec3(s2, k, m)
@@ -421,45 +548,36 @@ def advance_kernel(mode: int):
                       cstart: ti.template(), cidx: ti.template()):
         """(d^2, id row, id row) of the closest pair of ps (id order): a cell list of
         side about the mean spacing, doubled until the pair found lies closer than a cell
-        side (then no closer pair can sit outside the 3x3 cells)."""
-        lo = ti.math.vec2(ti.math.inf)
-        hi = ti.math.vec2(-ti.math.inf)
+        side (then no closer pair can sit outside the 3x3 (3x3x3) cells)."""
+        lo = _full(ti.math.inf, dim)
+        hi = _full(-ti.math.inf, dim)
         for i in range(a0, a0 + n):
-            lo = ti.min(lo, ti.math.vec2(ps[i, 0], ps[i, 1]))
-            hi = ti.max(hi, ti.math.vec2(ps[i, 0], ps[i, 1]))
-        w = ti.max(hi[0] - lo[0], hi[1] - lo[1]) / ti.sqrt(ti.cast(n, float))
+            lo = ti.min(lo, _row(ps, i, X, dim))
+            hi = ti.max(hi, _row(ps, i, X, dim))
+        ext = hi - lo
+        span = ti.max(ext[0], ext[1])
+        w = 0.0
+        if ti.static(dim == 3):
+            w = ti.max(span, ext[2]) / ti.pow(ti.cast(n, float), 1.0 / 3.0)
+        else:
+            w = span / ti.sqrt(ti.cast(n, float))
         if not (w > 0.0):
             w = 1.0
         best = ti.math.vec3(NEAREST_NONE, a0, a0)
         done = False
         while not done:
-            g = build_cells(a0, n, c0, cap, w, ps, False, cell, cstart, cidx)
-            nx = ti.cast(g[0], ti.i32)
-            ny = ti.cast(g[1], ti.i32)
+            g = build_cells(a0, n, c0, cap, w, ps, False, dim, cell, cstart, cidx)
+            nx = ti.cast(g[G_NX], ti.i32)
             best = ti.math.vec3(NEAREST_NONE, a0, a0)
             if nx <= 0:
                 best = closest_all_pairs(a0, n, ps)
                 done = True
             else:
                 for k in range(a0, a0 + n):
-                    i = cidx[k]
-                    cc = cell[i]
-                    cx = cc % nx
-                    cy = cc // nx
-                    xlo = ti.max(cx - 1, 0)
-                    xhi = ti.min(cx + 1, nx - 1)
-                    for dy in range(-1, 2):
-                        row = cy + dy
-                        if row >= 0 and row < ny:
-                            base = c0 + row * nx
-                            for m in range(a0 + cstart[base + xlo], a0 + cstart[base + xhi + 1]):
-                                j = cidx[m]
-                                if j != i:
-                                    d = ti.math.vec2(ps[j, 0] - ps[i, 0], ps[j, 1] - ps[i, 1])
-                                    s2 = d.dot(d)
-                                    if s2 < best[0]:
-                                        best = ti.math.vec3(s2, i, j)
-                w = g[2]
+                    best = visit_closest(k, a0, n, c0, nx, ti.cast(g[G_NY], ti.i32),
+                                         ti.cast(g[G_NZ], ti.i32), best, ti.math.vec4(0.0),
+                                         ps, cell, cstart, cidx, ())
+                w = g[G_W]
                 if best[0] < w * w:
                     done = True
                 else:
@@ -484,19 +602,19 @@ def advance_kernel(mode: int):
                       cstart: ti.template(), cidx: ti.template(), lo: ti.template(),
                       hi: ti.template(), obs: ti.template()):
         """W of eq. 5 and the closest pair (the graph's own observables are constants)."""
-        kin = velocity_stats(row, a0, n, ps, lo, hi, obs)
+        kin = velocity_stats(row, a0, n, ps, lo, hi, obs, dim)
         pot = 0.0
         for i in range(a0, a0 + n):
             for e in range(ptr[i], ptr[i + 1]):
                 j = idx[e]
-                d = ti.math.vec2(ps[j, 0] - ps[i, 0], ps[j, 1] - ps[i, 1])
+                d = _row(ps, j, X, dim) - _row(ps, i, X, dim)
                 pot += potentials.value(d.dot(d), prm[b, P.A], prm[b, P.C])
         obs[row, COL["energy"]] = 0.5 * pot + kin
         best = closest_cells(a0, n, c0, cap, ps, cell, cstart, cidx)
         write_closest(row, a0, best, False, cidx, obs)
 
     @ti.func
-    def observe_metric(b, a0, n, c0, nx, ny, w, row, nrow, q, prm: ti.template(),
+    def observe_metric(b, a0, n, c0, nx, ny, nz, w, row, nrow, q, prm: ti.template(),
                        iprm: ti.template(), ps: ti.template(), cell: ti.template(),
                        cstart: ti.template(), cidx: ti.template(), parent: ti.template(),
                        csum: ti.template(), lo: ti.template(), hi: ti.template(),
@@ -505,7 +623,7 @@ def advance_kernel(mode: int):
         """The switching observables of X(s) (ps in slot order) into obs[row], the
         valencies of observation `nrow` into val, and (for lambda_2) the snapshot of
         (r, R_i) in id order."""
-        kin = velocity_stats(row, a0, n, ps, lo, hi, obs)
+        kin = velocity_stats(row, a0, n, ps, lo, hi, obs, dim)
         for k in range(a0, a0 + n):
             parent[k] = k
         vper = iprm[b, IP.VPER]
@@ -517,7 +635,7 @@ def advance_kernel(mode: int):
         best = ti.math.vec3(NEAREST_NONE, a0, a0)
         for k in range(a0, a0 + n):
             acc = Acc5(0.0, NEAREST_NONE, ti.cast(k, float), 0.0, 0.0)
-            acc = visit_observe(k, a0, n, c0, nx, ny, acc, q, ps, cell, cstart, cidx,
+            acc = visit_observe(k, a0, n, c0, nx, ny, nz, acc, q, ps, cell, cstart, cidx,
                                 ti.static((parent,)))
             deg = acc[0]
             dsum += deg
@@ -567,7 +685,7 @@ def advance_kernel(mode: int):
                 dd = ti.sqrt((x[0] - prm[b, P.DX]) ** 2 + (x[1] - prm[b, P.DY]) ** 2)
                 dmean += dd
                 dfar = ti.max(dfar, dd)
-                r = ps[k, 4]
+                r = ps[k, RAD]
                 rmin = ti.min(rmin, r)
                 rmax = ti.max(rmax, r)
                 rsum += r
@@ -588,15 +706,16 @@ def advance_kernel(mode: int):
             # Paper 002: each component synchronises on its own.
             for k in range(a0, a0 + n):
                 root = find_serial(parent, k)
-                csum[root, 0] = csum[root, 0] + ps[k, 2]
-                csum[root, 1] = csum[root, 1] + ps[k, 3]
+                csum[root, 0] = csum[root, 0] + ps[k, V]
+                csum[root, 1] = csum[root, 1] + ps[k, V + 1]
                 csum[root, 2] = csum[root, 2] + 1.0
             dev = 0.0
             dev_max = 0.0
             for k in range(a0, a0 + n):
                 root = find_serial(parent, k)
                 cnt = csum[root, 2]
-                e = ti.math.vec2(ps[k, 2] - csum[root, 0] / cnt, ps[k, 3] - csum[root, 1] / cnt)
+                e = ti.math.vec2(ps[k, V] - csum[root, 0] / cnt,
+                                 ps[k, V + 1] - csum[root, 1] / cnt)
                 d2 = e.dot(e)
                 dev += d2
                 dev_max = ti.max(dev_max, d2)
@@ -606,13 +725,13 @@ def advance_kernel(mode: int):
             obs[row, COL["q_constant"]] = prm[b, P.QC]
         obs[row, COL["energy"]] = energy
         if iprm[b, IP.SNAP] != 0:
-            base = sbase[b] + (nrow - iprm[b, IP.SNAP0]) * n * 3
+            base = sbase[b] + (nrow - iprm[b, IP.SNAP0]) * n * (dim + 1)
             for k in range(a0, a0 + n):
-                at = base + (cidx[k] - a0) * 3
-                snap[at] = ps[k, 0]
-                snap[at + 1] = ps[k, 1]
+                at = base + (cidx[k] - a0) * (dim + 1)
+                for c in ti.static(range(dim)):
+                    snap[at + c] = ps[k, X + c]
                 if ti.static(mission):
-                    snap[at + 2] = ps[k, 4]
+                    snap[at + dim] = ps[k, RAD]
 
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, aoff: nd, coff: nd, ooff: nd, prm: nd, iprm: nd,
@@ -637,23 +756,25 @@ def advance_kernel(mode: int):
                     graph = s % every == 0 or s == steps  # an observation step
                     nx = 0
                     ny = 0
+                    nz = 1
                     w = 0.0
-                    ox = 0.0
-                    oy = 0.0
+                    o = _full(0.0, dim)
                     if ti.static(not fixed):
                         if iprm[b, IP.CELLS]:
                             w0 = prm[b, P.R] * ti.static(widen())
-                            g = build_cells(a0, n, c0, cap, w0, pos, True, cell, cstart, cidx)
-                            if g[0] < 0:
+                            g = build_cells(a0, n, c0, cap, w0, pos, True, dim, cell, cstart,
+                                            cidx)
+                            if g[G_NX] < 0:
                                 iprm[b, IP.BAD] = s
                                 iprm[b, IP.CAUSE] = 1
-                                prm[b, P.SPAN] = g[5]
+                                prm[b, P.SPAN] = g[G_SPAN]
                                 break
-                            nx = ti.cast(g[0], ti.i32)
-                            ny = ti.cast(g[1], ti.i32)
-                            w = g[2]
-                            ox = g[3]
-                            oy = g[4]
+                            nx = ti.cast(g[G_NX], ti.i32)
+                            ny = ti.cast(g[G_NY], ti.i32)
+                            nz = ti.cast(g[G_NZ], ti.i32)
+                            w = g[G_W]
+                            for c in ti.static(range(dim)):
+                                o[c] = g[G_O + c]
                         else:
                             for k in range(n):
                                 cidx[a0 + k] = a0 + k
@@ -662,15 +783,14 @@ def advance_kernel(mode: int):
                             cidx[a0 + k] = a0 + k
                     for k in range(a0, a0 + n):  # X(s) in slot order: every visit reads it
                         i = cidx[k]
-                        ps[k, 0] = pos[i, 0]
-                        ps[k, 1] = pos[i, 1]
-                        ps[k, 2] = vel[i, 0]
-                        ps[k, 3] = vel[i, 1]
+                        for c in ti.static(range(dim)):
+                            ps[k, X + c] = pos[i, c]
+                            ps[k, V + c] = vel[i, c]
                         if ti.static(mission):
-                            ps[k, 4] = rad[i]
+                            ps[k, RAD] = rad[i]
                         if ny < 0:  # hashed: each slot's exact cell
-                            ps[k, 5] = ti.floor((pos[i, 0] - ox) / w)
-                            ps[k, 6] = ti.floor((pos[i, 1] - oy) / w)
+                            for c in ti.static(range(dim)):
+                                ps[k, HC + c] = ti.floor((pos[i, c] - o[c]) / w)
                     if ti.static(mission):  # V_i at r(s): read by all three passes below
                         for k in range(a0, a0 + n):
                             nv = navigation(b, ti.math.vec2(ps[k, 0], ps[k, 1]), prm, iprm,
@@ -684,10 +804,9 @@ def advance_kernel(mode: int):
                             observe_fixed(b, a0, n, c0, cap, row, prm, ps, ptr, idx, cell,
                                           cstart, cidx, arc_lo, arc_hi, obs)
                         else:
-                            observe_metric(b, a0, n, c0, nx, ny, w, row, iprm[b, IP.NOBS], q, prm,
-                                           iprm, ps, cell, cstart, cidx, parent, csum,
-                                           arc_lo, arc_hi, mis, obs, val,
-                                           snap, sbase)
+                            observe_metric(b, a0, n, c0, nx, ny, nz, w, row, iprm[b, IP.NOBS],
+                                           q, prm, iprm, ps, cell, cstart, cidx, parent, csum,
+                                           arc_lo, arc_hi, mis, obs, val, snap, sbase)
                         iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
                     if s < steps:
                         if ti.static(mission):
@@ -697,22 +816,22 @@ def advance_kernel(mode: int):
                                 halved = 0
                                 grown = 0
                                 for k in range(a0, a0 + n):
-                                    r = ps[k, 4]
-                                    v2 = ps[k, 2] * ps[k, 2] + ps[k, 3] * ps[k, 3]
+                                    r = ps[k, RAD]
+                                    v2 = ps[k, V] * ps[k, V] + ps[k, V + 1] * ps[k, V + 1]
                                     new = r
                                     if v2 < prm[b, P.STUCK2] and mis[k, 0] > prm[b, P.VMIN]:
                                         new = ti.max(0.5 * r, prm[b, P.FLOOR])
                                         if new < r:
                                             halved += 1
                                     else:
-                                        new = visit_radius(k, a0, n, c0, nx, ny, r, q, ps,
+                                        new = visit_radius(k, a0, n, c0, nx, ny, nz, r, q, ps,
                                                            cell, cstart, cidx,
                                                            ti.static((parent,)))
                                         if new > r:
                                             grown += 1
                                     rad[cidx[k]] = new
                                 for k in range(a0, a0 + n):
-                                    ps[k, 4] = rad[cidx[k]]
+                                    ps[k, RAD] = rad[cidx[k]]
                                 iprm[b, IP.HALVED] = iprm[b, IP.HALVED] + halved
                                 iprm[b, IP.GROWN] = iprm[b, IP.GROWN] + grown
                         bad = 0
@@ -723,19 +842,22 @@ def advance_kernel(mode: int):
                             i = k
                             if ti.static(not fixed):
                                 i = cidx[k]
-                            xi = ti.math.vec2(ps[k, 0], ps[k, 1])
-                            vi = ti.math.vec2(ps[k, 2], ps[k, 3])
-                            u = ti.math.vec2(0.0)
+                            xi = _row(ps, k, X, dim)
+                            vi = _row(ps, k, V, dim)
+                            u = _full(0.0, dim)
                             if ti.static(fixed):
                                 for e in range(ptr[i], ptr[i + 1]):
                                     j = idx[e]
-                                    d = ti.math.vec2(ps[j, 0] - xi[0], ps[j, 1] - xi[1])
-                                    u += ti.math.vec2(ps[j, 2] - vi[0], ps[j, 3] - vi[1])
+                                    d = _row(ps, j, X, dim) - xi
+                                    u += _row(ps, j, V, dim) - vi
                                     u += potentials.force_factor(d.dot(d), q[2]) * d
                             else:
-                                acc = visit_force(k, a0, n, c0, nx, ny, ti.math.vec3(0.0), q,
-                                                  ps, cell, cstart, cidx, ti.static((parent,)))
-                                u = ti.math.vec2(acc[0], acc[1]) - acc[2] * vi
+                                acc = visit_force(k, a0, n, c0, nx, ny, nz, _full(0.0, dim + 1),
+                                                  q, ps, cell, cstart, cidx,
+                                                  ti.static((parent,)))
+                                for c in ti.static(range(dim)):
+                                    u[c] = acc[c]
+                                u -= acc[dim] * vi
                             if ti.static(mission):
                                 u -= ti.math.vec2(mis[k, 1], mis[k, 2])
                                 damp = iprm[b, IP.DAMP]
@@ -745,10 +867,8 @@ def advance_kernel(mode: int):
                                     u -= prm[b, P.CD] * vi
                             v = vi + dt * u
                             x = xi + dt * v
-                            pos[i, 0] = x[0]
-                            pos[i, 1] = x[1]
-                            vel[i, 0] = v[0]
-                            vel[i, 1] = v[1]
+                            _put(pos, i, x)
+                            _put(vel, i, v)
                             bad |= _nonfinite(x, v)
                         if bad != 0:
                             iprm[b, IP.BAD] = s
@@ -787,7 +907,7 @@ def _obstacle_grid(p) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, flo
 
 def lambda2_rows(pos: np.ndarray, radii: np.ndarray | float, own: bool, inclusive: bool,
                  components: np.ndarray, max_agents: int) -> np.ndarray:
-    """lambda_2 of the proximity graph of each snapshot (rows, N, 2), as the per-step path
+    """lambda_2 of the proximity graph of each snapshot (rows, N, dim), as the per-step path
     computes it (`observe.algebraic_connectivity`): 0 when disconnected; at
     N <= 32 the same dense eigvalsh, stacked over the rows."""
     rows, n = pos.shape[:2]
@@ -805,6 +925,8 @@ def lambda2_rows(pos: np.ndarray, radii: np.ndarray | float, own: bool, inclusiv
         return out
     d = pos[:, None, :, :] - pos[:, :, None, :]
     s2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
+    if pos.shape[2] == 3:
+        s2 = s2 + d[..., 2] * d[..., 2]
     if own:
         r2 = np.maximum(radii[:, :, None], radii[:, None, :]) ** 2
     else:
@@ -818,8 +940,10 @@ def lambda2_rows(pos: np.ndarray, radii: np.ndarray | float, own: bool, inclusiv
 
 class FlockingBatch(FusedBatch):
     """The state of a batch of M2 or M3 replicas (any N, graph, radius, obstacles, steps
-    each; one mode: fixed graph, switching, or M3), advanced window by window by
-    `advance_kernel`."""
+    each; one mode: fixed graph, switching, or M3; one dimension: 2 or 3, M3 2 only),
+    advanced window by window by `advance_kernel`."""
+
+    dimensions = (2, 3)
 
     def __init__(self, scenarios: list[Scenario]):
         from ...space.initial import initial_state
@@ -830,7 +954,8 @@ class FlockingBatch(FusedBatch):
         self.mode = ("mission" if self.kind == "flocking_obstacles"
                      else first.model.topology)
         fixed, mission = self.mode == "fixed", self.mode == "mission"
-        self.kernel = advance_kernel(MODES[self.mode])
+        self.dim = dim = first.dimension
+        self.kernel = advance_kernel(MODES[self.mode], dim)
         B = len(scenarios)
         ns = [s.n_agents for s in scenarios]
         self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
@@ -841,7 +966,7 @@ class FlockingBatch(FusedBatch):
         total = int(self.aoff[-1])
         prm = np.zeros((B, P.size))
         iprm = np.zeros((B, IP.size), dtype=np.int32)
-        pos, vel = np.zeros((total, 2)), np.zeros((total, 2))
+        pos, vel = np.zeros((total, dim)), np.zeros((total, dim))
         rad = np.zeros(total)
         ptr, idx = [np.zeros(1, dtype=np.int64)], []
         opos, orad, ostart = [], [], []
@@ -907,10 +1032,11 @@ class FlockingBatch(FusedBatch):
                 n_obst += len(cen)
                 n_ocell += len(start)
         self.B, self.total, self.rows = B, total, rows
-        # lambda_2 snapshots: K observation rows per replica per launch.
-        snap_agents = sum(3 * n for n, s in zip(ns, self.snap, strict=True) if s)
+        # lambda_2 snapshots of (r, R_i): K observation rows per replica per launch.
+        width = dim + 1
+        snap_agents = sum(width * n for n, s in zip(ns, self.snap, strict=True) if s)
         self.K = max(3, min(max(rows), SNAP_DOUBLES // max(snap_agents, 1)))
-        sizes = [self.K * 3 * n if s else 0 for n, s in zip(ns, self.snap, strict=True)]
+        sizes = [self.K * width * n if s else 0 for n, s in zip(ns, self.snap, strict=True)]
         self.sbase = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
         everies = [s.recording.observables_every
                    for s, on in zip(scenarios, self.snap, strict=True) if on]
@@ -935,7 +1061,7 @@ class FlockingBatch(FusedBatch):
         self.args = dict(
             aoff=arr(self.aoff, i32), coff=arr(self.coff, i32), ooff=arr(self.ooff, i32),
             prm=arr(prm), iprm=arr(iprm, i32), pos=arr(pos), vel=arr(vel), rad=arr(rad),
-            ps=scratch((total, 7)), cell=scratch(total, i32),
+            ps=scratch((total, columns(dim)[-1])), cell=scratch(total, i32),
             cstart=scratch(int(self.coff[-1]), i32), cidx=scratch(total, i32),
             parent=scratch(total, i32), csum=scratch((total, 3)),
             mis=scratch((total if mission else 1, 4)), arc_lo=scratch(total),
@@ -972,13 +1098,14 @@ class FlockingBatch(FusedBatch):
             if obs is None:
                 obs = self.args["obs"].to_numpy()
             sc = self.scenarios[b]
-            n = sc.n_agents
-            s = snap[self.sbase[b]:self.sbase[b] + (r1 - r0) * n * 3].reshape(r1 - r0, n, 3)
+            n, width = sc.n_agents, self.dim + 1
+            s = snap[self.sbase[b]:self.sbase[b] + (r1 - r0) * n * width]
+            s = s.reshape(r1 - r0, n, width)
             comps = obs[self.ooff[b] + r0:self.ooff[b] + r1, COL["components"]]
             own = self.mode == "mission"
-            radii = s[:, :, 2] if own else sc.neighbours.radius
-            self.lam[b][r0:r1] = lambda2_rows(s[:, :, :2], radii, own, sc.inclusive, comps,
-                                              sc.model.lambda2_max_agents)
+            radii = s[:, :, self.dim] if own else sc.neighbours.radius
+            self.lam[b][r0:r1] = lambda2_rows(s[:, :, :self.dim], radii, own, sc.inclusive,
+                                              comps, sc.model.lambda2_max_agents)
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         """The per-step path's series, in its order (kernel.py, obstacles.py)."""
@@ -986,7 +1113,7 @@ class FlockingBatch(FusedBatch):
         o0 = self.ooff[b]
         rows = self.host("obs")[o0:o0 + nobs]
         col = {k: rows[:, COL[k]] for k in OBS}
-        out = {"step": col["step"], **{k: col[k] for k in VELOCITY_KEYS}}
+        out = {"step": col["step"], **{k: col[k] for k in velocity_keys(self.dim)}}
         closest = {k: col[k] for k in ("min_distance", "min_pair_i", "min_pair_j")}
         if self.mode == "fixed":
             out["W"] = col["energy"]
@@ -1023,7 +1150,9 @@ class FlockingBatch(FusedBatch):
             vel = self.host("vel")[a0:a1]
             if "velocity" in arrays:
                 out["velocity"] = vel
-            if "heading" in arrays:
+            if "heading" in arrays and self.dim == 3:  # the unit velocity (N, 3)
+                out["heading"] = unit_rows(vel)
+            elif "heading" in arrays:
                 out["heading"] = np.arctan2(vel[:, 1], vel[:, 0])
         return out
 
@@ -1061,15 +1190,16 @@ class FlockingBatch(FusedBatch):
         span = float(self.args["prm"].to_numpy()[b, P.SPAN])
         if not np.isfinite(span):
             return step, "position", "a position became non-finite"
-        return step, "position", runaway_cause(span)
+        return step, "position", runaway_cause(span, self.dim)
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:
         """Scenarios with the same key share a launch; None (the per-step path) for the
-        rk4 integrator and for M3's radius_rule "min"."""
+        rk4 integrator, M3's radius_rule "min" and M3 in 3D (its fused kernel is planar)."""
         p = scenario.model
         if p.integrator != "semi_implicit_euler":
             return None
         if p.kind == "flocking_obstacles":
-            return ("flocking_obstacles",) if p.radius_rule == "own" else None
-        return ("flocking", p.topology)
+            planar_own = p.radius_rule == "own" and scenario.dimension == 2
+            return ("flocking_obstacles",) if planar_own else None
+        return ("flocking", p.topology, scenario.dimension)
