@@ -3,11 +3,14 @@
     python -m bench.small_n_flocking            # per-step cost at N = 5, 20, 100, 1000
                                                 # and the 10^4-step presets, both paths
     python -m bench.small_n_flocking --sizes    # the per-N table only
+    python -m bench.small_n_flocking --sizes --dim 3   # the same flocks in 3D
 
 One JSON line per measurement: wall and CPU time (`time.process_time`) per step, and the
 load average beside them (the machine is shared). Scenarios are preset-like: tjp-switching
 (and tjp-fixed) with the initial box grown with N at the preset's density, observables
 every 10 steps, no frames, one thread; compile and kernel loading excluded by a warm-up run.
+`--dim 3`: the same presets in 3D, the initial box a cube holding the preset's agents per
+unit area as agents per unit volume.
 """
 
 from __future__ import annotations
@@ -15,7 +18,6 @@ from __future__ import annotations
 import argparse
 import copy
 import json
-import math
 import os
 import time
 
@@ -24,17 +26,19 @@ from flocklab.schemas import PRESETS, Scenario
 SIZES = [5, 20, 100, 1000]
 
 
-def preset_like(name: str, n: int, steps: int) -> Scenario:
-    """The preset at N agents, the initial box scaled to keep the preset's density."""
+def preset_like(name: str, n: int, steps: int, dim: int = 2) -> Scenario:
+    """The preset at N agents in `dim` dimensions, the initial box (the preset's square of
+    side 5) scaled to keep its density."""
     spec = copy.deepcopy(PRESETS[name].build())  # build() shares its nested dicts
     spec["time"]["steps"] = steps
     spec["recording"] = {"every": 0, "observables_every": 10}
     spec["threads"] = 1
+    spec["space"]["dimension"] = dim
     init = spec["initial"]
-    if n != init["N"]:
-        half = 2.5 * math.sqrt(n / init["N"])
+    if n != init["N"] or dim != 2:
+        half = 0.5 * (25.0 * n / init["N"]) ** (1 / dim)  # N / 25 agents per unit
         init["N"] = n
-        init["region"] = {"kind": "box", "low": [-half, -half], "high": [half, half]}
+        init["region"] = {"kind": "box", "low": [-half] * dim, "high": [half] * dim}
     return Scenario.model_validate(spec)
 
 
@@ -59,6 +63,8 @@ def timed(sc: Scenario, fused: bool) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", action="store_true", help="the per-N table only")
+    ap.add_argument("--dim", type=int, choices=(2, 3), default=2,
+                    help="the flocks' dimension (the per-N table)")
     args = ap.parse_args()
     from flocklab.kernels import runtime
 
@@ -67,8 +73,9 @@ def main() -> None:
         for name in ("tjp-switching", "tjp-fixed"):
             for fused in (True, False):
                 steps = (3000 if n <= 100 else 1000) if fused else 300
-                row = timed(preset_like(name, n, steps), fused)
-                print(json.dumps({"scenario": name, "N": n, **row}), flush=True)
+                row = timed(preset_like(name, n, steps, args.dim), fused)
+                print(json.dumps({"scenario": name, "dim": args.dim, "N": n, **row}),
+                      flush=True)
     if args.sizes:
         return
     for name in ("tjp-switching", "tjp-fixed", "tanner-obstacles"):
