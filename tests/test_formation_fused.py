@@ -1,6 +1,6 @@
 """M4 on the fused small-N path: a replica gives the same bits alone, in a batch, cut into
 any windows, and the same prefix when cancelled; the engine picks the path from the
-scenario alone. (The plane is M4's only space.)"""
+scenario alone; in 2D and 3D. (The plane is M4's only space.)"""
 
 import numpy as np
 import pytest
@@ -8,7 +8,11 @@ import pytest
 from flocklab import kernels
 from flocklab.kernels import engine
 from flocklab.kernels.models.formation.fused import MAX_N, FormationBatch
+from flocklab.schemas import Scenario
 from tests.test_formation import STRAIGHT, explicit, scenario
+from tests.test_formation_3d import STRAIGHT as STRAIGHT_3D
+from tests.test_formation_3d import doc
+from tests.test_formation_3d import explicit as explicit_3d
 
 SPLINE = {"kind": "spline", "waypoints": [[0.0, 60.0], [-50.0, 50.0]], "arrival_time": 2.0}
 # A mix a sweep would batch together: designs, gains, paths, schedules, N, steps, seeds.
@@ -26,6 +30,37 @@ MIX = [
      dict(N=30, steps=25, seed=3, obs_every=4, inclusive=True)),
     (dict(design="F2", path=SPLINE), dict(N=7, steps=40, seed=4, obs_every=3)),
 ]
+SPLINE_3D = {"kind": "spline", "waypoints": [[0.0, 60.0, 20.0], [-50.0, 50.0, -10.0]],
+             "arrival_time": 2.0}
+# 3D runs F1 only on this path: named (cube, shell) and explicit 3-column formations,
+# rotations about an axis and morphs, straight and spline paths.
+MIX_3D = [
+    (dict(attraction={"kind": "linear", "k": 1.5}, path=STRAIGHT_3D,
+          formation={"kind": "named", "shape": "cube", "orientation": 0.3},
+          schedule=[{"start": 0.1, "end": 0.3, "rotate": 2.0, "axis": [1.0, 2.0, 3.0]}]),
+     dict(N=10, steps=40)),
+    (dict(attraction={"kind": "quadratic", "c": 0.05},
+          repulsion={"kind": "inverse_square", "k_g": 400.0}, path=SPLINE_3D,
+          formation={"kind": "named", "shape": "shell"},
+          schedule=[{"start": 0.0, "end": 0.2, "formation": explicit_3d("cube", 12, 0.4),
+                     "relaxation": "linear"}]), dict(N=12, steps=33, seed=2)),
+    (dict(attraction={"kind": "saturating", "k": 2.0, "v_max": 9.0},
+          path={"kind": "straight", "target": [10.0, 12.0, 14.0], "arrival_time": 4.0},
+          formation=explicit_3d("wedge", 30),
+          schedule=[{"start": 0.05, "end": 0.15, "rotate": -1.0}]),
+     dict(N=30, steps=25, seed=3, obs_every=4, inclusive=True)),
+]
+MIXES = {2: MIX, 3: MIX_3D}
+
+
+def scenario_in(dim, model, *, every=1, arrays=("position",), inclusive=None, **kw):
+    """test_formation's scenario in 2D; in 3D the same in a 3D box (test_formation_3d)."""
+    if dim == 2:
+        return scenario(model, every=every, arrays=arrays, inclusive=inclusive, **kw)
+    spec = doc(model, every=every, **kw)
+    spec["recording"]["arrays"] = list(arrays)
+    spec["neighbours"]["inclusive"] = inclusive
+    return Scenario.model_validate(spec)
 
 
 def same_result(a, b):
@@ -45,11 +80,14 @@ class Frames:
         self.frames.append(arrays)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("integrator", ["euler", "rk4"])
-def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, fixed_windows, integrator):
-    scenarios = [scenario(dict(m, integrator=integrator), every=0, **kw) for m, kw in MIX]
+def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, fixed_windows, integrator,
+                                                   dim):
+    scenarios = [scenario_in(dim, dict(m, integrator=integrator), every=0, **kw)
+                 for m, kw in MIXES[dim]]
     together = kernels.run_batch(scenarios)
-    assert len(engine._batches(scenarios)) == 1  # one launch for all four
+    assert len(engine._batches(scenarios)) == 1  # one launch for all of them
     alone = [kernels.run(sc) for sc in scenarios]
     # And in windows of 7 steps, some replicas ending before the others.
     fixed_windows(59 * 7)
@@ -61,17 +99,19 @@ def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, fixed_windows, in
         same_result(res_cut, ref)
 
 
-def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, fixed_windows):
-    m, kw = MIX[1]
+@pytest.mark.parametrize("dim", [2, 3])
+def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, fixed_windows, dim):
+    m, kw = MIXES[dim][1]
     arrays = ("position", "velocity")
-    whole = kernels.run(scenario(m, every=0, **kw))
+    whole = kernels.run(scenario_in(dim, m, every=0, **kw))
+    assert whole.extra["engine_path"] == "fused"
     sink = Frames()
-    framed = kernels.run(scenario(m, every=7, arrays=arrays, **kw), sink=sink)
+    framed = kernels.run(scenario_in(dim, m, every=7, arrays=arrays, **kw), sink=sink)
     assert sink.steps == [*range(0, 33, 7), 33]
     fixed_windows(12 * 3)  # windows of 3 steps
-    cut = kernels.run(scenario(m, every=0, **kw))
+    cut = kernels.run(scenario_in(dim, m, every=0, **kw))
     cut_sink = Frames()
-    kernels.run(scenario(m, every=7, arrays=arrays, **kw), sink=cut_sink)
+    kernels.run(scenario_in(dim, m, every=7, arrays=arrays, **kw), sink=cut_sink)
     same_result(whole, framed)
     same_result(whole, cut)
     assert cut_sink.steps == sink.steps
@@ -80,7 +120,9 @@ def test_windows_and_frames_do_not_change_a_bit(taichi_cpu, fixed_windows):
             assert np.array_equal(a[k], b[k]), k
     # The last frame's velocity is the rate of the last state (the observation's speeds).
     v = sink.frames[-1]["velocity"]
-    assert np.hypot(*v.T).max() == pytest.approx(whole.final["speed_max"], rel=1e-12)
+    assert v.shape == (12, dim)
+    assert np.linalg.norm(v, axis=1).max() == pytest.approx(whole.final["speed_max"],
+                                                            rel=1e-12)
 
 
 def test_cancel_keeps_the_prefix_and_observes_the_stop(taichi_cpu, fixed_windows):
@@ -115,16 +157,20 @@ def test_divergence_stops_only_its_replica(taichi_cpu):
     assert len(res[2].observables["step"]) == res[2].steps
 
 
+@pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("integrator", ["euler", "rk4"])
 @pytest.mark.parametrize("case", ["runaway", "coincident"])
 def test_divergence_has_the_per_step_step_and_cause(taichi_cpu, monkeypatch, integrator,
-                                                    case):
+                                                    case, dim):
+    m = {"design": "F2", "path": STRAIGHT}
+    if dim == 3:  # F2 is not fused in 3D: F1 in a cube
+        m = {"path": STRAIGHT_3D, "formation": {"kind": "named", "shape": "cube"}}
     if case == "runaway":
-        m, kw = {"design": "F2", "path": STRAIGHT}, dict(N=30, dt=1e3, steps=20)
+        kw = dict(N=30, dt=1e3, steps=20)
     else:
-        m, kw = {"design": "F2", "path": STRAIGHT}, dict(
-            positions=[[0.0, 0.0], [3.0, 0.0], [3.0, 0.0]], steps=20)
-    sc = scenario(dict(m, integrator=integrator), every=0, **kw)
+        kw = dict(positions=[[0.0, 0.0, 0.0][:dim], [3.0, 0.0, 0.0][:dim],
+                             [3.0, 0.0, 0.0][:dim]], steps=20)
+    sc = scenario_in(dim, dict(m, integrator=integrator), every=0, **kw)
     fused = kernels.run(sc)
     monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
     per_step = kernels.run(sc)
@@ -134,6 +180,7 @@ def test_divergence_has_the_per_step_step_and_cause(taichi_cpu, monkeypatch, int
     assert fused.error == per_step.error
     assert fused.steps == per_step.steps
     assert np.array_equal(fused.observables["step"], per_step.observables["step"])
+    assert ("spans" if case == "runaway" else "same position") in fused.error["cause"]
 
 
 def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
@@ -148,25 +195,37 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     assert engine.fused_batch(small, "cpu") is FormationBatch
     assert engine.fused_batch(small, "cuda") is None
     assert kernels.run(scenario(m, N=114, steps=2)).extra["engine_path"] == "per_step"
+    # 3D: F1 is fused (never in one launch with 2D), F2 not (its D3 is the host's LP).
+    f1 = scenario_in(3, {"path": STRAIGHT_3D, "formation": {"kind": "named", "shape": "cube"}},
+                     N=20, steps=2)
+    assert engine.fused_batch(f1, "cpu") is FormationBatch
+    assert len(engine._batches([small, f1])) == 2
+    f2 = scenario_in(3, {"design": "F2", "path": STRAIGHT_3D}, N=20, steps=2)
+    assert FormationBatch.batch_key(f2) is None
+    assert kernels.run(f2).extra["engine_path"] == "per_step"
 
 
-def test_the_spline_table_is_the_scalar_path():
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_spline_table_is_the_scalar_path(dim):
     """The vectorised arc-length inversion the fused path tabulates p(t) and q(t) with
     gives the scalar solver's values (to its tolerance), before and after the arrival."""
     from flocklab.kernels.models.formation.path import SplineTable, make_path
     from flocklab.schemas.formation import SplinePath
 
-    spline = make_path(SplinePath.model_validate(SPLINE), np.array([25.0, 25.0]))
+    spec = SplinePath.model_validate(SPLINE if dim == 2 else SPLINE_3D)
+    spline = make_path(spec, np.full(dim, 25.0))
     t = np.linspace(0.0, 2.5, 601)  # arrival at 2.0
     table = SplineTable(spline)
     want_q = np.arange(len(t)) % 3 == 0
     pq = table.at(t, want_q)
-    p, q = pq[:, :2], pq[want_q, 2:]
+    assert pq.shape == (len(t), 2 * dim)
+    p, q = pq[:, :dim], pq[want_q, dim:]
     np.testing.assert_allclose(p, [spline.position(x) for x in t], rtol=0, atol=1e-11)
     np.testing.assert_allclose(q, [spline.velocity(x) for x in t[want_q]], rtol=0,
                                atol=1e-11)
-    assert np.all(pq[~want_q, 2:] == 0.0)
-    assert np.all(q[t[want_q] >= 2.0] == 0.0) and np.hypot(*q[t[want_q] < 2.0].T).min() > 1
+    assert np.all(pq[~want_q, dim:] == 0.0)
+    moving = t[want_q] < 2.0
+    assert np.all(q[~moving] == 0.0) and np.linalg.norm(q[moving], axis=1).min() > 1
     # Row by row the same bits however the times are cut (the windows of a run).
     cut = np.concatenate([table.at(t[:7], want_q[:7]), table.at(t[7:300], want_q[7:300]),
                           table.at(t[300:], want_q[300:])])
@@ -181,17 +240,32 @@ SCHEDULE = [  # rotate, morph, an abrupt rotation, morph (linear), rotate (linea
     {"start": 0.25, "end": 0.3, "formation": explicit("line", 9), "relaxation": "linear"},
     {"start": 0.31, "end": 0.35, "rotate": 2.0, "relaxation": "linear"},
 ]
+SCHEDULE_3D = [  # the same chain in 3D: rotations about tilted axes and z, 3D formations
+    {"start": 0.05, "end": 0.1, "rotate": 1.0, "axis": [1.0, 2.0, 3.0]},
+    {"start": 0.12, "end": 0.2, "formation": {"kind": "named", "shape": "shell"}},
+    {"start": 0.2, "end": 0.2, "rotate": -0.5},
+    {"start": 0.25, "end": 0.3, "formation": explicit_3d("cube", 9, 0.2),
+     "relaxation": "linear"},
+    {"start": 0.31, "end": 0.35, "rotate": 2.0, "relaxation": "linear",
+     "axis": [0.0, -1.0, 0.5]},
+]
+CHAIN = {2: ({"kind": "named", "shape": "wedge"}, SCHEDULE, STRAIGHT, SPLINE),
+         3: ({"kind": "named", "shape": "cube", "orientation": 0.3}, SCHEDULE_3D,
+             STRAIGHT_3D, SPLINE_3D)}
 
 
-@pytest.mark.parametrize("integrator, path", [("euler", STRAIGHT), ("rk4", SPLINE)],
-                         ids=["euler-straight", "rk4-spline"])
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("integrator", ["euler", "rk4"])
 def test_both_paths_agree_through_a_chain_of_formation_changes(taichi_cpu, monkeypatch,
-                                                              integrator, path):
+                                                              integrator, dim):
     """The in-kernel schedule (which stored formation, which weights, at every stage time)
-    against the per-step path's host schedule, frames and every observable."""
-    m = dict(path=path, formation={"kind": "named", "shape": "wedge"}, schedule=SCHEDULE,
-             integrator=integrator)
-    sc = scenario(m, N=9, steps=40, every=8, arrays=("position", "velocity"), obs_every=3)
+    against the per-step path's host schedule, frames and every observable (Euler on a
+    straight path, RK4 on a spline)."""
+    formation, schedule, straight, spline = CHAIN[dim]
+    m = dict(path=straight if integrator == "euler" else spline, formation=formation,
+             schedule=schedule, integrator=integrator)
+    sc = scenario_in(dim, m, N=9, steps=40, every=8, arrays=("position", "velocity"),
+                     obs_every=3)
     runs = {}
     for name in ("fused", "per_step"):
         if name == "per_step":
@@ -210,3 +284,4 @@ def test_both_paths_agree_through_a_chain_of_formation_changes(taichi_cpu, monke
         for k in x:
             np.testing.assert_allclose(x[k], y[k], rtol=1e-12, atol=1e-11, err_msg=k)
     assert a.observables["formation_error_max"].max() > 1.0  # the changes do show
+    assert ("leader_z" in a.observables) == (dim == 3)

@@ -10,9 +10,14 @@ arrays and the observables written into a per-replica buffer. The host comes bac
 frame, progress and cancellation points, which never changes a bit: a replica computes
 the same numbers alone, in a batch, or cut into any windows.
 
+The dimension (2 or 3) is a compile-time parameter of the kernels, as on the per-step path:
+positions, p(t), q(t) and b_i(t) are dim-vectors, and 2D compiles to the arithmetic it had
+before 3D (its bits unchanged); 3D adds `leader_z` and `centroid_z` to the observables.
+
 The leader is evaluated inside the kernel at every step (and RK4 half step): a straight
 path as p0 + q t until the arrival time, F1's schedule (rotations, morphs, smoothstep or
-linear) from the stored formations and their 2x2 weights. A spline path's arc-length
+linear) from the stored formations and their dim x dim weights; a 3D rotation turns
+about its change's axis (Rodrigues' formula, `shapes.rotation3`). A spline path's arc-length
 timing is the host's (`path.SplineTable`, the per-step path's arc-length
 inversion vectorised over t): p(t), and q(t) at observation steps, are tabulated for each
 window (about 0.1 ms per step on the host, the fused path's largest cost for a spline).
@@ -20,7 +25,8 @@ window (about 0.1 ms per step on the host, the fused path's largest cost for a s
 Not on this path (`FormationBatch.batch_key` returns None, the per-step path runs them):
 a run whose Euler step could enter the dense regime (9 N > `max_exact_candidates`: the
 per-step path coarse-grains there), N above `MAX_N` (all pairs would cost more than the
-per-step path's grid), and N = 1 (no pair for the minimum distance).
+per-step path's grid), N = 1 (no pair for the minimum distance), and F2 in 3D (D3 there
+is a linear program per component, `props.surrounds_3d`, the host's).
 
 Here: the window kernel and the batch; the terms (f, g, leader, rdot_i, parameter slots)
 are in `fused_terms`, the observables in `fused_observe`.
@@ -33,7 +39,13 @@ import numpy as np
 import taichi as ti
 
 from flocklab.schemas import Scenario
-from flocklab.schemas.formation import FormationParams, QuadraticF, SaturatingF, SplinePath
+from flocklab.schemas.formation import (
+    FormationChange,
+    FormationParams,
+    QuadraticF,
+    SaturatingF,
+    SplinePath,
+)
 
 from ... import runtime
 from ...batch import FusedBatch
@@ -41,19 +53,22 @@ from ...space.cells import SPREAD
 from ...space.grid import runaway_cause, widen
 from ...space.initial import initial_state
 from .forces import F_KINDS, G_KINDS
-from .fused_observe import COMMON, F1_OBS, F2_OBS, N_OBS, OBS, observe
+from .fused_observe import COMMON, COMMON_3D, F1_OBS, F2_OBS, N_OBS, OBS, observe
 from .fused_terms import (
     IP,
     P,
     is_nonfinite,
     leader_state,
+    position,
     rate,
     runaway,
 )
-from .path import SplineTable, make_path
+from .norms import norms
+from .path import LeaderPath, SplineTable, StraightLine, make_path
 from .schedule import OffsetSchedule
 
 nd = ti.types.ndarray()
+CHANGE_COLS = 7  # chg's columns (_change_row)
 MAX_N = 512  # all pairs up to here: at N = 1000 a fused F2 step cost as much CPU as a
 # per-step one (4.3 vs 4.2 ms, the per-step path on 2 threads), at N = 500 1.3 vs 2.2 ms
 # Why a replica stopped (iprm[IP.CAUSE]), as the per-step path words it: its step check
@@ -69,8 +84,9 @@ CAUSES = (
 
 
 @cache
-def advance_kernel(rk4: bool):
-    """The window kernel and the frame-velocity kernel for one integrator."""
+def advance_kernel(rk4: bool, dim: int):
+    """The window kernel and the frame-velocity kernel for one integrator and dimension
+    (positions (N, dim); RK4's rates kk hold the four stages' dim columns side by side)."""
 
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, h0: ti.i32, aoff: nd, ooff: nd, prm: nd, iprm: nd,
@@ -88,42 +104,42 @@ def advance_kernel(rk4: bool):
                 s = s0
                 while s < s1 and s <= steps and iprm[b, IP.BAD] < 0:
                     h = s * per
-                    if runaway(b, a0, n, pos, prm, iprm) != 0:
+                    if runaway(b, a0, n, pos, prm, iprm, dim) != 0:
                         iprm[b, IP.BAD] = s
                         break
                     if s % every == 0 or s == steps:
                         row = ooff[b] + iprm[b, IP.NOBS]
                         iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
                         observe(b, a0, n, s, h, h0, row, prm, iprm, chg, inforce, lead,
-                                 forms, pos, deg, parent, ang, gmax, gcnt, obs)
+                                 forms, pos, deg, parent, ang, gmax, gcnt, obs, dim)
                     if s < steps:
                         coincident = 0
                         nonfinite = 0
                         lp, _q, ma, mb, ka, kb = leader_state(b, h, h0, prm, iprm, chg,
-                                                               inforce, lead)
+                                                               inforce, lead, dim)
                         if ti.static(not rk4):
                             for i in range(a0, a0 + n):
-                                ps[i, 0] = pos[i, 0]
-                                ps[i, 1] = pos[i, 1]
+                                for c in ti.static(range(dim)):
+                                    ps[i, c] = pos[i, c]
                             for i in range(a0, a0 + n):
                                 r = rate(b, i, a0, n, ps, lp, ma, mb, ka, kb, prm, iprm,
-                                          forms)
-                                x = ps[i, 0] + dt * r[0]
-                                yy = ps[i, 1] + dt * r[1]
-                                pos[i, 0] = x
-                                pos[i, 1] = yy
-                                coincident |= ti.cast(r[2] > 0.0, ti.i32)
-                                nonfinite |= ti.cast(is_nonfinite(x, yy), ti.i32)
+                                          forms, dim)
+                                x = ti.Vector.zero(float, dim)
+                                for c in ti.static(range(dim)):
+                                    x[c] = ps[i, c] + dt * r[c]
+                                    pos[i, c] = x[c]
+                                coincident |= ti.cast(r[dim] > 0.0, ti.i32)
+                                nonfinite |= ti.cast(is_nonfinite(x, dim), ti.i32)
                         else:
                             # k1 at (x, t); k2, k3 at (x + dt/2 k, t + dt/2); k4 at
                             # (x + dt k3, t + dt): y holds each stage's positions.
                             for i in range(a0, a0 + n):
                                 r = rate(b, i, a0, n, pos, lp, ma, mb, ka, kb, prm, iprm,
-                                          forms)
-                                kk[i, 0] = r[0]
-                                kk[i, 1] = r[1]
-                                coincident |= ti.cast(r[2] > 0.0, ti.i32)
-                                nonfinite |= ti.cast(is_nonfinite(r[0], r[1]), ti.i32)
+                                          forms, dim)
+                                for c in ti.static(range(dim)):
+                                    kk[i, c] = r[c]
+                                coincident |= ti.cast(r[dim] > 0.0, ti.i32)
+                                nonfinite |= ti.cast(is_nonfinite(r, dim), ti.i32)
                             stop = 0  # the stage grid's check stops the step at once
                             for stage in ti.static(range(1, 4)):
                                 a = 0.5 * dt
@@ -131,31 +147,31 @@ def advance_kernel(rk4: bool):
                                     a = dt
                                 if stop == 0:
                                     for i in range(a0, a0 + n):
-                                        for c in ti.static(range(2)):
-                                            y[i, c] = pos[i, c] + a * kk[i, 2 * stage - 2 + c]
-                                    stop = runaway(b, a0, n, y, prm, iprm)
+                                        for c in ti.static(range(dim)):
+                                            y[i, c] = pos[i, c] + a * kk[i, dim * (stage - 1) + c]
+                                    stop = runaway(b, a0, n, y, prm, iprm, dim)
                                 if stop == 0:
                                     hp = h + 1
                                     if ti.static(stage == 3):
                                         hp = h + 2
                                     lq, _q2, mq, mr, kq, kr = leader_state(
-                                        b, hp, h0, prm, iprm, chg, inforce, lead)
+                                        b, hp, h0, prm, iprm, chg, inforce, lead, dim)
                                     for i in range(a0, a0 + n):
                                         r = rate(b, i, a0, n, y, lq, mq, mr, kq, kr, prm,
-                                                  iprm, forms)
-                                        kk[i, 2 * stage] = r[0]
-                                        kk[i, 2 * stage + 1] = r[1]
-                                        coincident |= ti.cast(r[2] > 0.0, ti.i32)
-                                        nonfinite |= ti.cast(is_nonfinite(r[0], r[1]), ti.i32)
+                                                  iprm, forms, dim)
+                                        for c in ti.static(range(dim)):
+                                            kk[i, dim * stage + c] = r[c]
+                                        coincident |= ti.cast(r[dim] > 0.0, ti.i32)
+                                        nonfinite |= ti.cast(is_nonfinite(r, dim), ti.i32)
                             if stop != 0:
                                 iprm[b, IP.BAD] = s
                                 break
                             for i in range(a0, a0 + n):
-                                for c in ti.static(range(2)):
+                                for c in ti.static(range(dim)):
                                     pos[i, c] = pos[i, c] + dt / 6.0 * (
-                                        kk[i, c] + 2.0 * kk[i, 2 + c] + 2.0 * kk[i, 4 + c]
-                                        + kk[i, 6 + c])
-                                nonfinite |= ti.cast(is_nonfinite(pos[i, 0], pos[i, 1]),
+                                        kk[i, c] + 2.0 * kk[i, dim + c]
+                                        + 2.0 * kk[i, 2 * dim + c] + kk[i, 3 * dim + c])
+                                nonfinite |= ti.cast(is_nonfinite(position(pos, i, dim), dim),
                                                      ti.i32)
                         if coincident != 0 or nonfinite != 0:
                             iprm[b, IP.BAD] = s
@@ -170,24 +186,29 @@ def advance_kernel(rk4: bool):
         for _ in range(1):  # one serial task: the sums in the step's order
             a0 = aoff[b]
             n = aoff[b + 1] - a0
-            lp, _q, ma, mb, ka, kb = leader_state(b, h, h, prm, iprm, chg, inforce, lead)
+            lp, _q, ma, mb, ka, kb = leader_state(b, h, h, prm, iprm, chg, inforce, lead,
+                                                  dim)
             for i in range(a0, a0 + n):
-                r = rate(b, i, a0, n, pos, lp, ma, mb, ka, kb, prm, iprm, forms)
-                vel[i, 0] = r[0]
-                vel[i, 1] = r[1]
+                r = rate(b, i, a0, n, pos, lp, ma, mb, ka, kb, prm, iprm, forms, dim)
+                for c in ti.static(range(dim)):
+                    vel[i, c] = r[c]
 
     return advance, velocity
 
 
 class FormationBatch(FusedBatch):
     """The state of a batch of M4 replicas (any N <= MAX_N, design, gains, path, schedule,
-    steps each; one integrator), advanced window by window by `advance_kernel`."""
+    steps each; one integrator and dimension), advanced window by window by
+    `advance_kernel`."""
+
+    dimensions = (2, 3)
 
     def __init__(self, scenarios: list[Scenario]):
         self.scenarios = scenarios
         p0: FormationParams = scenarios[0].model  # type: ignore[assignment]
         self.per = 2 if p0.integrator == "rk4" else 1
-        self.advance_k, self.velocity_k = advance_kernel(p0.integrator == "rk4")
+        self.dim = dim = scenarios[0].dimension
+        self.advance_k, self.velocity_k = advance_kernel(p0.integrator == "rk4", dim)
         ns = [s.n_agents for s in scenarios]
         self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
         rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
@@ -195,16 +216,16 @@ class FormationBatch(FusedBatch):
         B, total = len(scenarios), int(self.aoff[-1])
         prm = np.zeros((B, P.size))
         iprm = np.zeros((B, IP.size), dtype=np.int32)
-        pos = np.zeros((total, 2))
+        pos = np.zeros((total, dim))
         chg, inforce, forms = [], [], []
         self.paths, self.f1 = [], []
         for b, sc in enumerate(scenarios):
             p: FormationParams = sc.model  # type: ignore[assignment]
-            n, d, dt = sc.n_agents, sc.neighbours.radius, sc.time.dt
+            n, d = sc.n_agents, sc.neighbours.radius
             init = initial_state(sc)
             path = make_path(p.path, init.positions.mean(axis=0))
             if isinstance(p.attraction, SaturatingF):  # as FormationKernel refuses it
-                top = float(np.hypot(*path.velocity(0.0)))
+                top = float(norms(path.velocity(0.0)))
                 if top >= p.attraction.v_max:
                     raise ValueError(
                         f"leader speed {top:g} >= attraction.v_max = "
@@ -215,25 +236,14 @@ class FormationBatch(FusedBatch):
             self.f1.append(f1)
             a0 = int(self.aoff[b])
             pos[a0:a0 + n] = init.positions
-            f = p.attraction
-            spline = isinstance(p.path, SplinePath)
-            straight = (np.zeros(2), np.zeros(2), 0.0, np.zeros(2)) if spline else (
-                path.start, path.q, path.arrival_time, path.end)
-            prm[b, :] = [
-                runtime.next_above(d * d) if sc.inclusive else d * d, d, d * d,
-                p.repulsion.k_g, f.c if isinstance(f, QuadraticF) else f.k,
-                f.v_max if isinstance(f, SaturatingF) else 0.0, dt, dt / self.per,
-                *straight[0], *straight[1], straight[2], *straight[3],
-                p.collision_distance or d / 100.0, p.leader_tolerance or d / 100.0,
-                -1.0 if p.lag_sign == "eq8" else 1.0, d * widen(), 0.0]
+            prm[b, :] = self._params(sc, path)
             iprm[b, :] = [sc.time.steps, sc.recording.observables_every, -1, 0, 0,
-                          F_KINDS[f.kind], G_KINDS[p.repulsion.kind], int(f1), int(spline),
-                          len(chg), len(p.schedule), len(inforce), len(forms)]
+                          F_KINDS[p.attraction.kind], G_KINDS[p.repulsion.kind], int(f1),
+                          int(isinstance(p.path, SplinePath)), len(chg), len(p.schedule),
+                          len(inforce), len(forms)]
             if f1:
-                sched = OffsetSchedule(p.formation, p.schedule, n, d)
-                for c in p.schedule:
-                    chg.append([c.start, c.end, np.nan if c.rotate is None else c.rotate,
-                                float(c.relaxation == "linear")])
+                sched = OffsetSchedule(p.formation, p.schedule, n, d, dim)
+                chg.extend(_change_row(c, dim) for c in p.schedule)
                 inforce.extend([k, *m.ravel()] for k, m in sched.in_force)
                 forms.extend(row for k in sched.stored for row in k)
         self.steps = iprm[:, IP.STEPS].copy()
@@ -248,23 +258,40 @@ class FormationBatch(FusedBatch):
         i32 = ti.i32
         self.args = dict(
             aoff=arr(self.aoff, None, i32), ooff=arr(self.ooff, None, i32),
-            prm=arr(prm, None), iprm=arr(iprm, None, i32), chg=arr(chg, (1, 4)),
-            inforce=arr(inforce, (1, 5)), forms=arr(forms, (1, 2)),
-            lead0=ti.ndarray(float, shape=(B, 1, 4)), pos=arr(pos, None),
-            ps=ti.ndarray(float, shape=(total, 2)),
-            kk=ti.ndarray(float, shape=(total, 8) if self.per == 2 else (1, 8)),
-            y=ti.ndarray(float, shape=(total, 2) if self.per == 2 else (1, 2)),
+            prm=arr(prm, None), iprm=arr(iprm, None, i32), chg=arr(chg, (1, CHANGE_COLS)),
+            inforce=arr(inforce, (1, 1 + dim * dim)), forms=arr(forms, (1, dim)),
+            lead0=ti.ndarray(float, shape=(B, 1, 2 * dim)), pos=arr(pos, None),
+            ps=ti.ndarray(float, shape=(total, dim)),
+            kk=ti.ndarray(float, shape=(total if self.per == 2 else 1, 4 * dim)),
+            y=ti.ndarray(float, shape=(total if self.per == 2 else 1, dim)),
             deg=ti.ndarray(i32, shape=total), parent=ti.ndarray(i32, shape=total),
             ang=ti.ndarray(float, shape=total), gmax=ti.ndarray(float, shape=total),
             gcnt=ti.ndarray(i32, shape=total),
             obs=arr(np.zeros((int(self.ooff[-1]), N_OBS)), None),
-            vel=ti.ndarray(float, shape=(total, 2)),
+            vel=ti.ndarray(float, shape=(total, dim)),
         )
         self.splines = [b for b, sc in enumerate(scenarios)
                         if isinstance(sc.model.path, SplinePath)]
         self.tables = {b: SplineTable(self.paths[b]) for b in self.splines}
         self.last_p: dict[int, tuple[int, np.ndarray]] = {}  # b: (h, p) of the last row
         self.now = np.zeros(B, dtype=np.int64)  # each replica's current step
+
+    def _params(self, sc: Scenario, path: LeaderPath) -> np.ndarray:
+        """Replica `sc`'s row of prm (a spline's timing is the host's: its S, Q, E unused)."""
+        p: FormationParams = sc.model  # type: ignore[assignment]
+        f = p.attraction
+        d, dt = sc.neighbours.radius, sc.time.dt
+        row = P.pack(
+            R2=runtime.next_above(d * d) if sc.inclusive else d * d, D=d, D2=d * d,
+            KG=p.repulsion.k_g, FA=f.c if isinstance(f, QuadraticF) else f.k,
+            FB=f.v_max if isinstance(f, SaturatingF) else 0.0, DT=dt, TSTEP=dt / self.per,
+            COLLIDE=p.collision_distance or d / 100.0, TOL=p.leader_tolerance or d / 100.0,
+            LAG_SIGN=-1.0 if p.lag_sign == "eq8" else 1.0, CELL=d * widen())
+        if isinstance(path, StraightLine):
+            row[P.T_ARR] = path.arrival_time
+            for first, v in ((P.S, path.start), (P.Q, path.q), (P.E, path.end)):
+                row[first:first + self.dim] = v
+        return row
 
     def _lead_table(self, s0: int, s1: int) -> ti.Ndarray:
         """The spline leaders' p(t) for the window's time indices (and q(t) at the
@@ -273,7 +300,7 @@ class FormationBatch(FusedBatch):
             return self.args["lead0"]  # read by spline replicas only
         h0 = s0 * self.per
         rows = (s1 - s0) * self.per + 1
-        table = np.zeros((len(self.scenarios), rows, 4))
+        table = np.zeros((len(self.scenarios), rows, 2 * self.dim))
         for b in self.splines:
             sc = self.scenarios[b]
             steps, every = int(self.steps[b]), sc.recording.observables_every
@@ -283,7 +310,7 @@ class FormationBatch(FusedBatch):
             s, rem = np.divmod(h, self.per)
             seen = (rem == 0) & ((s % every == 0) | (s == steps))  # observation steps
             table[b, : len(h)] = self.tables[b].at(h * (sc.time.dt / self.per), seen)
-            self.last_p[b] = (int(h[-1]), table[b, len(h) - 1, :2].copy())
+            self.last_p[b] = (int(h[-1]), table[b, len(h) - 1, :self.dim].copy())
         return self._device("lead", table)
 
     def _device(self, name: str, a: np.ndarray) -> ti.Ndarray:
@@ -312,7 +339,8 @@ class FormationBatch(FusedBatch):
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         o0 = self.ooff[b]
         rows = self.host("obs")[o0:o0 + iprm[b, IP.NOBS]]
-        keep = COMMON + (F1_OBS if self.f1[b] else F2_OBS)
+        keep = COMMON + (COMMON_3D if self.dim == 3 else ()) + (
+            F1_OBS if self.f1[b] else F2_OBS)
         return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
 
     def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
@@ -328,9 +356,9 @@ class FormationBatch(FusedBatch):
                 at, p = self.last_p.get(b, (-1, None))
                 if at != h:
                     t = np.array([h * (self.scenarios[b].time.dt / self.per)])
-                    p = self.tables[b].at(t, np.zeros(1, dtype=bool))[0, :2]
-                lead = np.zeros((len(self.scenarios), 1, 4))
-                lead[b, 0, :2] = p
+                    p = self.tables[b].at(t, np.zeros(1, dtype=bool))[0, :self.dim]
+                lead = np.zeros((len(self.scenarios), 1, 2 * self.dim))
+                lead[b, 0, :self.dim] = p
                 table = self._device("frame_lead", lead)
             self.velocity_k(b, h, a["aoff"], a["prm"], a["iprm"], a["chg"], a["inforce"],
                             a["forms"], table, a["pos"], a["vel"])
@@ -350,7 +378,7 @@ class FormationBatch(FusedBatch):
             return None
         cause = CAUSES[iprm[b, IP.CAUSE]]
         if iprm[b, IP.CAUSE] == 3:
-            cause = runaway_cause(float(self.args["prm"].to_numpy()[b, P.EXTENT]))
+            cause = runaway_cause(float(self.args["prm"].to_numpy()[b, P.EXTENT]), self.dim)
         return step, "position", cause
 
     @staticmethod
@@ -358,9 +386,22 @@ class FormationBatch(FusedBatch):
         """Scenarios with the same key share a launch; None: not for this path (see the
         module docstring)."""
         p: FormationParams = scenario.model  # type: ignore[assignment]
-        n = scenario.n_agents
+        n, dim = scenario.n_agents, scenario.dimension
         cap = p.max_exact_candidates
         if n < 2 or n > MAX_N or (p.integrator == "euler" and cap is not None
                                   and 9 * n > cap):
             return None
-        return ("formation", p.integrator)
+        if dim == 3 and p.design == "F2":
+            return None  # its D3 is an LP (props.surrounds_3d), the host's
+        return ("formation", p.integrator, dim)
+
+
+def _change_row(c: FormationChange, dim: int) -> list[float]:
+    """A change's row of chg: start, end, the angle (NaN: a morph), linear (1) or
+    smoothstep (0), and in 3D the rotation's unit axis (default z; shapes.rotation3)."""
+    axis = np.zeros(3)
+    if dim == 3 and c.rotate is not None:
+        axis = np.asarray(c.axis or (0.0, 0.0, 1.0), dtype=np.float64)
+        axis = axis / np.linalg.norm(axis)
+    return [c.start, c.end, np.nan if c.rotate is None else c.rotate,
+            float(c.relaxation == "linear"), *axis]

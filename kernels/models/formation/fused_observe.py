@@ -1,5 +1,7 @@
 """The fused M4 path's observation: every observable of the per-step path (FormationKernel
-.observe, props' D1-D3) of one replica's state, into one row of its buffer."""
+.observe, props' D1-D3) of one replica's state, into one row of its buffer; in 3D also
+`leader_z` and `centroid_z`. D3 is the 2D angular-gap test: F2 in 3D (D3 an LP,
+props.surrounds_3d) stays on the per-step path."""
 
 import numpy as np
 import taichi as ti
@@ -14,6 +16,7 @@ from .fused_terms import (
     lag_length,
     leader_state,
     pair_energy,
+    position,
     target,
 )
 
@@ -23,9 +26,11 @@ _NO_PAIR = 1e300  # nearest-pair sentinel
 OBS = ("step", "leader_x", "leader_y", "leader_speed", "centroid_x", "centroid_y",
        "centroid_distance", "speed_min", "speed_mean", "speed_max", "speed_error_max",
        "velocity_mismatch_max", "min_distance", "degree_mean", "formation_error",
-       "formation_error_max", "lag", "V1", "V2", "D1", "D2", "D3", "isolated", "components")
+       "formation_error_max", "lag", "V1", "V2", "D1", "D2", "D3", "isolated", "components",
+       "leader_z", "centroid_z")
 N_OBS = len(OBS)
 COMMON = OBS[1:14]
+COMMON_3D = ("leader_z", "centroid_z")  # after COMMON, as the per-step path orders them
 F1_OBS = ("formation_error", "formation_error_max", "lag", "V1")
 F2_OBS = ("V2", "D1", "D2", "D3", "isolated", "components")
 
@@ -37,9 +42,9 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
              chg: ti.template(), inforce: ti.template(), lead: ti.template(),
              forms: ti.template(), pos: ti.template(), deg: ti.template(),
              parent: ti.template(), ang: ti.template(), gmax: ti.template(),
-             gcnt: ti.template(), obs: ti.template()):
+             gcnt: ti.template(), obs: ti.template(), dim: ti.template()):
     """The observables of X(s) (time index h) into obs[row]: the columns of OBS."""
-    p, q, ma, mb, ka, kb = leader_state(b, h, h0, prm, iprm, chg, inforce, lead)
+    p, q, ma, mb, ka, kb = leader_state(b, h, h0, prm, iprm, chg, inforce, lead, dim)
     fk = iprm[b, IP.FKIND]
     fa = prm[b, P.FA]
     fb = prm[b, P.FB]
@@ -51,14 +56,13 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
     f1 = iprm[b, IP.F1] != 0
     qn = ti.sqrt(q.dot(q))
     lag = lag_length(qn, fk, fa, fb)
-    a = ti.math.vec2(0.0)
+    a = ti.Vector.zero(float, dim)
     if qn > 0.0:
         a = (lag / qn) * q * prm[b, P.LAG_SIGN]
     tol = prm[b, P.TOL]
     for i in range(a0, a0 + n):
         parent[i] = i
-    cx = 0.0
-    cy = 0.0
+    csum = ti.Vector.zero(float, dim)
     smin = ti.math.inf
     ssum = 0.0
     smax = 0.0
@@ -73,12 +77,12 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
     lead_k = -1  # the agent at r_0 (F2): the nearest to p, within the tolerance
     lead_d = ti.math.inf
     for i in range(a0, a0 + n):
-        xi = ti.math.vec2(pos[i, 0], pos[i, 1])
-        rep = ti.math.vec2(0.0)
+        xi = position(pos, i, dim)
+        rep = ti.Vector.zero(float, dim)
         k = 0
         for j in range(a0, a0 + n):
             if j != i:
-                dv = ti.math.vec2(pos[j, 0] - xi[0], pos[j, 1] - xi[1])
+                dv = position(pos, j, dim) - xi
                 e2 = dv.dot(dv)
                 near = ti.min(near, e2)
                 if e2 < r2:
@@ -91,7 +95,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
                         union_serial(parent, i, j)
         deg[i] = k
         dsum += k
-        li = target(b, i, a0, n, p, ma, mb, ka, kb, iprm, forms)
+        li = target(b, i, a0, n, p, ma, mb, ka, kb, iprm, forms, dim)
         v = attract(li - xi, fk, fa, fb) + rep
         sp = ti.sqrt(v.dot(v))
         smin = ti.min(smin, sp)
@@ -100,8 +104,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
         serr = ti.max(serr, ti.abs(sp - qn))
         vm = v - q
         vmis = ti.max(vmis, ti.sqrt(vm.dot(vm)))
-        cx += xi[0]
-        cy += xi[1]
+        csum += xi
         if f1:
             err = xi - (li + a)
             e = ti.sqrt(err.dot(err))
@@ -118,7 +121,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
                 lead_k = i
             gmax[i] = -1.0  # no far agent in i's component (yet)
             gcnt[i] = 0
-    c = ti.math.vec2(cx / n, cy / n)
+    c = csum / n
     obs[row, 0] = s
     obs[row, 1] = p[0]
     obs[row, 2] = p[1]
@@ -133,12 +136,15 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
     obs[row, 11] = vmis
     obs[row, 12] = ti.sqrt(near)
     obs[row, 13] = ti.cast(dsum, float) / n
+    if ti.static(dim == 3):
+        obs[row, 24] = p[2]
+        obs[row, 25] = c[2]
     if f1:
         obs[row, 14] = esum / n
         obs[row, 15] = emax
         obs[row, 16] = lag
         obs[row, 17] = fsum + 0.5 * gsum
-    else:
+    elif ti.static(dim == 2):  # F2 in 3D is not fused (FormationBatch.batch_key)
         obs[row, 18] = fsum + 0.5 * gsum
         obs[row, 19] = ti.cast(ti.sqrt(near) >= prm[b, P.COLLIDE], float)  # D1
         if lead_d > tol:

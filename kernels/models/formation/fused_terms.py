@@ -1,7 +1,9 @@
 """The fused M4 path's per-replica parameter slots and its Taichi terms, all pairs:
 f, g, F, G and the lag with runtime gains (forces has them compile-time), the
 leader and F1's schedule at a time index, l_i, rdot_i, and the per-step grid's runaway
-check."""
+check. Positions, p(t), q(t) and b_i(t) are dim-vectors and the schedule's weights dim x dim
+matrices, dim (2 or 3) a compile-time parameter: 2D compiles to the arithmetic it had
+before 3D, term for term."""
 
 import taichi as ti
 
@@ -10,8 +12,9 @@ from ...space.params import Slots
 from .forces import F_KINDS, G_KINDS
 
 # Per-replica parameter slots: prm (f64) and iprm (i32).
-P = Slots("R2", "D", "D2", "KG", "FA", "FB", "DT", "TSTEP", "SX", "SY", "QX", "QY", "T_ARR", "EX",
-         "EY", "COLLIDE", "TOL", "LAG_SIGN", "CELL", "EXTENT")
+# A straight path's start S, velocity Q and end E take 3 slots each (2D uses the first two).
+P = Slots("R2", "D", "D2", "KG", "FA", "FB", "DT", "TSTEP", "T_ARR", "COLLIDE", "TOL",
+          "LAG_SIGN", "CELL", "EXTENT", S=3, Q=3, E=3)
 IP = Slots("STEPS", "EVERY", "BAD", "CAUSE", "NOBS", "FKIND", "GKIND", "F1", "SPLINE", "C0", "NC",
           "I0", "F0")
 
@@ -41,7 +44,7 @@ def pair_energy(s, kind, kg, d, d2):
 @ti.func
 def attract(z, kind, fa, fb):
     """f(|z|) z / |z| (forces.attract with runtime gains)."""
-    v = ti.math.vec2(0.0)
+    v = ti.Vector.zero(float, z.n)
     if kind == F_KINDS["linear"]:
         v = fa * z
     elif kind == F_KINDS["quadratic"]:
@@ -82,25 +85,64 @@ def lag_length(qn, kind, fa, fb):
 
 
 @ti.func
+def slot_vector(prm: ti.template(), b, first, dim: ti.template()):
+    """The dim-vector in prm[b, first:first + dim]."""
+    v = ti.Vector.zero(float, dim)
+    for c in ti.static(range(dim)):
+        v[c] = prm[b, first + c]
+    return v
+
+
+@ti.func
+def stored_weights(inforce: ti.template(), k, dim: ti.template()):
+    """The dim x dim matrix M of in-force row k (row-major after its formation index)."""
+    m = ti.Matrix.zero(float, dim, dim)
+    for r in ti.static(range(dim)):
+        for c in ti.static(range(dim)):
+            m[r, c] = inforce[k, 1 + dim * r + c]
+    return m
+
+
+@ti.func
+def rotated(angle, m, chg: ti.template(), j, dim: ti.template()):
+    """R(angle) M: in the plane, or about change j's unit axis u (chg[j, 4:7]) in 3D by
+    Rodrigues' formula R = I + sin K + (1 - cos) K^2, K = [u]_x (shapes.rotation3)."""
+    c = ti.cos(angle)
+    sn = ti.sin(angle)
+    out = ti.Matrix.zero(float, dim, dim)
+    if ti.static(dim == 2):  # written out: the bits of 2D runs predate 3D
+        out = ti.Matrix([[c * m[0, 0] - sn * m[1, 0], c * m[0, 1] - sn * m[1, 1]],
+                         [sn * m[0, 0] + c * m[1, 0], sn * m[0, 1] + c * m[1, 1]]])
+    else:
+        u = ti.math.vec3(chg[j, 4], chg[j, 5], chg[j, 6])
+        k = ti.Matrix([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+        r = ti.Matrix.identity(float, 3) + sn * k + (1.0 - c) * (k @ k)
+        out = r @ m
+    return out
+
+
+@ti.func
 def leader_state(b, h, h0, prm: ti.template(), iprm: ti.template(), chg: ti.template(),
-                  inforce: ti.template(), lead: ti.template()):
+                  inforce: ti.template(), lead: ti.template(), dim: ti.template()):
     """The leader at half-step index h (t = h * TSTEP): (p, q, M_A, M_B, k_A, k_B) with
-    b_i = M_A A_i + M_B B_i over the stored formations k_A, k_B (k_B = -1: none), as
-    OffsetSchedule.weights and StraightLine / the host's spline table give them."""
+    b_i = M_A A_i + M_B B_i over the stored formations k_A, k_B (k_B = -1: none; M dim x
+    dim), as OffsetSchedule.weights and StraightLine / the host's spline table (p in its
+    first dim columns, q in the next dim) give them."""
     t = h * prm[b, P.TSTEP]
-    p = ti.math.vec2(0.0)
-    q = ti.math.vec2(0.0)
+    p = ti.Vector.zero(float, dim)
+    q = ti.Vector.zero(float, dim)
     if iprm[b, IP.SPLINE] != 0:
         r = h - h0
-        p = ti.math.vec2(lead[b, r, 0], lead[b, r, 1])
-        q = ti.math.vec2(lead[b, r, 2], lead[b, r, 3])
+        for c in ti.static(range(dim)):
+            p[c] = lead[b, r, c]
+            q[c] = lead[b, r, dim + c]
     elif t >= prm[b, P.T_ARR]:
-        p = ti.math.vec2(prm[b, P.EX], prm[b, P.EY])
+        p = slot_vector(prm, b, P.E, dim)
     else:
-        q = ti.math.vec2(prm[b, P.QX], prm[b, P.QY])
-        p = ti.math.vec2(prm[b, P.SX], prm[b, P.SY]) + q * t
-    ma = ti.math.vec4(0.0)
-    mb = ti.math.vec4(0.0)
+        q = slot_vector(prm, b, P.Q, dim)
+        p = slot_vector(prm, b, P.S, dim) + q * t
+    ma = ti.Matrix.zero(float, dim, dim)
+    mb = ti.Matrix.zero(float, dim, dim)
     ka = 0
     kb = -1
     if iprm[b, IP.F1] != 0:
@@ -121,92 +163,118 @@ def leader_state(b, h, h0, prm: ti.template(), iprm: ti.template(), chg: ti.temp
             if chg[c0 + j, 3] != 0.0:
                 s = u
             ka = ti.cast(inforce[i0 + j, 0], ti.i32)
-            m = ti.math.vec4(inforce[i0 + j, 1], inforce[i0 + j, 2], inforce[i0 + j, 3],
-                             inforce[i0 + j, 4])
+            m = stored_weights(inforce, i0 + j, dim)
             phi = chg[c0 + j, 2]
             if not ti.math.isnan(phi):  # rotate by s phi: R(s phi) M
-                c = ti.cos(s * phi)
-                sn = ti.sin(s * phi)
-                ma = ti.math.vec4(c * m[0] - sn * m[2], c * m[1] - sn * m[3],
-                                  sn * m[0] + c * m[2], sn * m[1] + c * m[3])
+                ma = rotated(s * phi, m, chg, c0 + j, dim)
             else:  # morph: (1 - s) M B_c + s K'
                 ma = (1.0 - s) * m
                 kb = ti.cast(inforce[i0 + j + 1, 0], ti.i32)
-                mb = ti.math.vec4(s, 0.0, 0.0, s)
+                mb = s * ti.Matrix.identity(float, dim)
             found = 1
             break
         if found == 0:
             ka = ti.cast(inforce[i0 + done, 0], ti.i32)
-            ma = ti.math.vec4(inforce[i0 + done, 1], inforce[i0 + done, 2],
-                              inforce[i0 + done, 3], inforce[i0 + done, 4])
+            ma = stored_weights(inforce, i0 + done, dim)
     return p, q, ma, mb, ka, kb
 
 
 @ti.func
-def target(b, i, a0, n, p, ma, mb, ka, kb, iprm: ti.template(), forms: ti.template()):
+def weighted(m, forms: ti.template(), f, dim: ti.template()):
+    """M K[f], each row's terms summed left to right."""
+    v = ti.Vector.zero(float, dim)
+    for r in ti.static(range(dim)):
+        x = m[r, 0] * forms[f, 0]
+        for c in ti.static(range(1, dim)):
+            x += m[r, c] * forms[f, c]
+        v[r] = x
+    return v
+
+
+@ti.func
+def target(b, i, a0, n, p, ma, mb, ka, kb, iprm: ti.template(), forms: ti.template(),
+           dim: ti.template()):
     """l_i: p (F2) or p + M_A A_i + M_B B_i (F1)."""
     r = p
     if iprm[b, IP.F1] != 0:
-        f = iprm[b, IP.F0] + ka * n + i - a0
-        r += ti.math.vec2(ma[0] * forms[f, 0] + ma[1] * forms[f, 1],
-                          ma[2] * forms[f, 0] + ma[3] * forms[f, 1])
+        r += weighted(ma, forms, iprm[b, IP.F0] + ka * n + i - a0, dim)
         if kb >= 0:
-            g = iprm[b, IP.F0] + kb * n + i - a0
-            r += ti.math.vec2(mb[0] * forms[g, 0] + mb[1] * forms[g, 1],
-                              mb[2] * forms[g, 0] + mb[3] * forms[g, 1])
+            r += weighted(mb, forms, iprm[b, IP.F0] + kb * n + i - a0, dim)
     return r
 
 
 @ti.func
+def position(src: ti.template(), i, dim: ti.template()):
+    """Row i of `src` as a dim-vector."""
+    v = ti.Vector.zero(float, dim)
+    for c in ti.static(range(dim)):
+        v[c] = src[i, c]
+    return v
+
+
+@ti.func
 def rate(b, i, a0, n, src: ti.template(), lp, ma, mb, ka, kb, prm: ti.template(),
-          iprm: ti.template(), forms: ti.template()):
-    """(rdot_x, rdot_y, coincident neighbours) of agent i at the positions `src`."""
-    xi = ti.math.vec2(src[i, 0], src[i, 1])
+          iprm: ti.template(), forms: ti.template(), dim: ti.template()):
+    """(rdot_i, coincident neighbours) of agent i at the positions `src`: a
+    (dim + 1)-vector."""
+    xi = position(src, i, dim)
     r2 = prm[b, P.R2]
     gk = iprm[b, IP.GKIND]
     kg = prm[b, P.KG]
     d = prm[b, P.D]
     d2 = prm[b, P.D2]
-    acc = ti.math.vec3(0.0)
+    acc = ti.Vector.zero(float, dim + 1)
     for j in range(a0, a0 + n):
-        dv = ti.math.vec2(src[j, 0] - xi[0], src[j, 1] - xi[1])
+        dv = position(src, j, dim) - xi
         e2 = dv.dot(dv)
         # r2 is the strict threshold: d^2 for "<", the next double above it for "<="
         if j != i and e2 < r2:
             if e2 > 0.0:
                 w = g_over_s(ti.sqrt(e2), gk, kg, d, d2)
-                acc += ti.math.vec3(w * dv[0], w * dv[1], 0.0)
+                for c in ti.static(range(dim)):
+                    acc[c] += w * dv[c]
             else:
-                acc[2] += 1.0
-    v = attract(target(b, i, a0, n, lp, ma, mb, ka, kb, iprm, forms) - xi, iprm[b, IP.FKIND],
-                 prm[b, P.FA], prm[b, P.FB])
-    return ti.math.vec3(v[0] + acc[0], v[1] + acc[1], acc[2])
+                acc[dim] += 1.0
+    v = attract(target(b, i, a0, n, lp, ma, mb, ka, kb, iprm, forms, dim) - xi,
+                iprm[b, IP.FKIND], prm[b, P.FA], prm[b, P.FB])
+    out = ti.Vector.zero(float, dim + 1)
+    for c in ti.static(range(dim)):
+        out[c] = v[c] + acc[c]
+    out[dim] = acc[dim]
+    return out
 
 
 @ti.func
-def is_nonfinite(x, y):
-    s = x + y  # NaN if either is NaN or infinite
+def is_nonfinite(x, dim: ti.template()):
+    """Whether one of x's first dim components is NaN or infinite (a rate's last, the
+    coincident count, is not a coordinate)."""
+    s = x[0]  # NaN if any is NaN or infinite
+    for c in ti.static(range(1, dim)):
+        s += x[c]
     return ti.math.isnan(s) or ti.math.isinf(s)
 
 
 @ti.func
-def runaway(b, a0, n, src: ti.template(), prm: ti.template(), iprm: ti.template()):
+def runaway(b, a0, n, src: ti.template(), prm: ti.template(), iprm: ti.template(),
+            dim: ti.template()):
     """The per-step grid's check of the positions it is about to bucket: 1 (and the
-    replica stopped with cause 2 or 3) if one is non-finite or the swarm spans over 2^30
-    cells of side d."""
-    lo = ti.math.vec2(ti.math.inf)
-    hi = ti.math.vec2(-ti.math.inf)
+    replica stopped with cause 2 or 3) if one is non-finite or the swarm spans over
+    max_cells_across(dim) cells of side d."""
+    lo = ti.Vector([ti.math.inf] * dim)
+    hi = ti.Vector([-ti.math.inf] * dim)
     bad = 0
     for i in range(a0, a0 + n):
-        x = ti.math.vec2(src[i, 0], src[i, 1])
-        bad |= ti.cast(is_nonfinite(x[0], x[1]), ti.i32)
+        x = position(src, i, dim)
+        bad |= ti.cast(is_nonfinite(x, dim), ti.i32)
         lo = ti.min(lo, x)
         hi = ti.max(hi, x)
-    extent = ti.max(hi[0] - lo[0], hi[1] - lo[1])
+    extent = hi[0] - lo[0]
+    for c in ti.static(range(1, dim)):
+        extent = ti.max(extent, hi[c] - lo[c])
     cause = -1
     if bad != 0:
         cause = 2
-    elif extent / prm[b, P.CELL] > ti.static(max_cells_across()):
+    elif extent / prm[b, P.CELL] > ti.static(max_cells_across(dim)):
         cause = 3
         prm[b, P.EXTENT] = extent
     if cause >= 0:
