@@ -137,9 +137,7 @@ def engine_path(request, monkeypatch, taichi_cpu):
 def test_matches_brute_force_step_by_step(engine_path, name):
     sc, result, sink = run(doc(CASES[name]))
     assert result.status == "completed", result.error
-    # F2 is not fused in 3D (its D3 is an LP, solved on the host)
-    f2 = CASES[name].get("design") == "F2"
-    assert result.extra["engine_path"] == ("per_step" if f2 else engine_path)
+    assert result.extra["engine_path"] == engine_path
     m = sc.model.model_dump(mode="json")
     x = sink.pos[0].copy()
     assert x.shape == (12, 3)

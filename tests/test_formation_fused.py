@@ -7,6 +7,7 @@ import pytest
 
 from flocklab import kernels
 from flocklab.kernels import engine
+from flocklab.kernels.models.formation import fused
 from flocklab.kernels.models.formation.fused import MAX_N, FormationBatch
 from flocklab.schemas import Scenario
 from tests.test_formation import STRAIGHT, explicit, scenario
@@ -32,8 +33,20 @@ MIX = [
 ]
 SPLINE_3D = {"kind": "spline", "waypoints": [[0.0, 60.0, 20.0], [-50.0, 50.0, -10.0]],
              "arrival_time": 2.0}
-# 3D runs F1 only on this path: named (cube, shell) and explicit 3-column formations,
-# rotations about an axis and morphs, straight and spline paths.
+# F2 in 3D: a leader too fast to keep up with (D3 fails, the LP's, once the group trails
+# it), a box where the random start is several components (D3 fails on lone agents until
+# they meet), a spline the group trails and then surrounds at its end.
+FAST_3D = {"kind": "straight", "target": [-40.0, -30.0, 25.0], "speed": 40.0}
+BIG_BOX = {"kind": "box", "low": [0.0, 0.0, 0.0], "high": [60.0, 60.0, 60.0]}
+F2_3D = [
+    (dict(design="F2", attraction={"kind": "linear", "k": 1.0}, path=FAST_3D),
+     dict(N=12, steps=60, obs_every=3)),
+    (dict(design="F2", attraction={"kind": "linear", "k": 1.0}, path=FAST_3D),
+     dict(N=12, steps=60, obs_every=3, region=BIG_BOX)),
+    (dict(design="F2", path=SPLINE_3D), dict(N=10, steps=80, seed=4, obs_every=2, dt=0.05)),
+]
+# 3D: named (cube, shell) and explicit 3-column formations, rotations about an axis and
+# morphs, straight and spline paths; F2 with its D3 from the host's snapshots.
 MIX_3D = [
     (dict(attraction={"kind": "linear", "k": 1.5}, path=STRAIGHT_3D,
           formation={"kind": "named", "shape": "cube", "orientation": 0.3},
@@ -49,6 +62,7 @@ MIX_3D = [
           formation=explicit_3d("wedge", 30),
           schedule=[{"start": 0.05, "end": 0.15, "rotate": -1.0}]),
      dict(N=30, steps=25, seed=3, obs_every=4, inclusive=True)),
+    *F2_3D,
 ]
 MIXES = {2: MIX, 3: MIX_3D}
 
@@ -162,9 +176,7 @@ def test_divergence_stops_only_its_replica(taichi_cpu):
 @pytest.mark.parametrize("case", ["runaway", "coincident"])
 def test_divergence_has_the_per_step_step_and_cause(taichi_cpu, monkeypatch, integrator,
                                                     case, dim):
-    m = {"design": "F2", "path": STRAIGHT}
-    if dim == 3:  # F2 is not fused in 3D: F1 in a cube
-        m = {"path": STRAIGHT_3D, "formation": {"kind": "named", "shape": "cube"}}
+    m = {"design": "F2", "path": STRAIGHT if dim == 2 else STRAIGHT_3D}
     if case == "runaway":
         kw = dict(N=30, dt=1e3, steps=20)
     else:
@@ -195,14 +207,15 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     assert engine.fused_batch(small, "cpu") is FormationBatch
     assert engine.fused_batch(small, "cuda") is None
     assert kernels.run(scenario(m, N=114, steps=2)).extra["engine_path"] == "per_step"
-    # 3D: F1 is fused (never in one launch with 2D), F2 not (its D3 is the host's LP).
+    # 3D: F1 and F2 are fused (in one launch, never with 2D; F2's D3 from snapshots).
     f1 = scenario_in(3, {"path": STRAIGHT_3D, "formation": {"kind": "named", "shape": "cube"}},
                      N=20, steps=2)
     assert engine.fused_batch(f1, "cpu") is FormationBatch
     assert len(engine._batches([small, f1])) == 2
     f2 = scenario_in(3, {"design": "F2", "path": STRAIGHT_3D}, N=20, steps=2)
-    assert FormationBatch.batch_key(f2) is None
-    assert kernels.run(f2).extra["engine_path"] == "per_step"
+    assert engine.fused_batch(f2, "cpu") is FormationBatch
+    assert len(engine._batches([f1, f2])) == 1
+    assert kernels.run(f2).extra["engine_path"] == "fused"
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -285,3 +298,56 @@ def test_both_paths_agree_through_a_chain_of_formation_changes(taichi_cpu, monke
             np.testing.assert_allclose(x[k], y[k], rtol=1e-12, atol=1e-11, err_msg=k)
     assert a.observables["formation_error_max"].max() > 1.0  # the changes do show
     assert ("leader_z" in a.observables) == (dim == 3)
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk4"])
+def test_a_snapshot_buffer_smaller_than_a_window_does_not_change_a_bit(taichi_cpu,
+                                                                       monkeypatch,
+                                                                       integrator):
+    """3D F2's D3 snapshots: a buffer of 3 rows cuts every window into launches of one
+    observation interval (the host's D3 after each); F1 in the batch takes none."""
+    scenarios = [scenario_in(3, dict(m, integrator=integrator), every=0, **kw)
+                 for m, kw in MIX_3D]
+    whole = kernels.run_batch(scenarios)
+    monkeypatch.setattr(fused, "SNAP_DOUBLES", 1)
+    small = FormationBatch(scenarios)
+    assert (small.K, small.chunk) == (3, 2)  # the smallest observables_every: 2
+    assert small.snap == [False] * 3 + [True] * 3
+    launches = []
+    launch = FormationBatch._launch
+    monkeypatch.setattr(FormationBatch, "_launch",
+                        lambda self, s0, s1: (launches.append(s1 - s0), launch(self, s0, s1)))
+    cut = kernels.run_batch(scenarios)
+    assert max(launches) == 2 and len(launches) >= 30
+    for a, b in zip(whole, cut, strict=True):
+        assert a.status == "completed", a.error
+        same_result(a, b)
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk4"])
+@pytest.mark.parametrize("case", range(len(F2_3D)))
+def test_both_paths_agree_on_f2_in_3d(taichi_cpu, monkeypatch, integrator, case):
+    """3D F2 fused (D1, D2, isolated, components in the kernel, D3 the host's LP on its
+    snapshots) against the per-step path: every observable and the frames; D3 takes both
+    values."""
+    m, kw = F2_3D[case]
+    sc = scenario_in(3, dict(m, integrator=integrator), every=20, **kw)
+    runs = {}
+    for name in ("fused", "per_step"):
+        if name == "per_step":
+            monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+        sink = Frames()
+        res = kernels.run(sc, sink=sink)
+        assert res.extra["engine_path"] == name and res.status == "completed", res.error
+        runs[name] = res, sink
+    (a, fa), (b, fb) = runs["fused"], runs["per_step"]
+    assert a.observables.keys() == b.observables.keys()
+    for k in a.observables:
+        np.testing.assert_allclose(a.observables[k], b.observables[k], rtol=1e-12,
+                                   atol=1e-12, err_msg=k)
+    for k in ("D1", "D2", "D3", "isolated", "components"):
+        assert np.array_equal(a.observables[k], b.observables[k]), k
+    assert set(a.observables["D3"]) == {0.0, 1.0}
+    assert fa.steps == fb.steps
+    for x, y in zip(fa.frames, fb.frames, strict=True):
+        np.testing.assert_allclose(x["position"], y["position"], rtol=1e-12, atol=1e-11)

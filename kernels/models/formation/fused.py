@@ -13,6 +13,11 @@ the same numbers alone, in a batch, or cut into any windows.
 The dimension (2 or 3) is a compile-time parameter of the kernels, as on the per-step path:
 positions, p(t), q(t) and b_i(t) are dim-vectors, and 2D compiles to the arithmetic it had
 before 3D (its bits unchanged); 3D adds `leader_z` and `centroid_z` to the observables.
+F2's D3 in 3D is a linear program per component (`props.surrounds_3d`), the host's: at each
+observation the kernel writes the replica's positions and component labels into a snapshot
+buffer, and after each launch the host fills D3 from them with `props.d3_holds_3d` (as
+the flocking family's lambda_2). A window is cut into launches of at most `chunk` steps
+when the buffer cannot hold all of its observations, which never changes a bit.
 
 The leader is evaluated inside the kernel at every step (and RK4 half step): a straight
 path as p0 + q t until the arrival time, F1's schedule (rotations, morphs, smoothstep or
@@ -25,8 +30,7 @@ window (about 0.1 ms per step on the host, the fused path's largest cost for a s
 Not on this path (`FormationBatch.batch_key` returns None, the per-step path runs them):
 a run whose Euler step could enter the dense regime (9 N > `max_exact_candidates`: the
 per-step path coarse-grains there), N above `MAX_N` (all pairs would cost more than the
-per-step path's grid), N = 1 (no pair for the minimum distance), and F2 in 3D (D3 there
-is a linear program per component, `props.surrounds_3d`, the host's).
+per-step path's grid), and N = 1 (no pair for the minimum distance).
 
 Here: the window kernel and the batch; the terms (f, g, leader, rdot_i, parameter slots)
 are in `fused_terms`, the observables in `fused_observe`.
@@ -53,7 +57,16 @@ from ...space.cells import SPREAD
 from ...space.grid import runaway_cause, widen
 from ...space.initial import initial_state
 from .forces import F_KINDS, G_KINDS
-from .fused_observe import COMMON, COMMON_3D, F1_OBS, F2_OBS, N_OBS, OBS, observe
+from .fused_observe import (
+    COMMON,
+    COMMON_3D,
+    F1_OBS,
+    F2_OBS,
+    N_OBS,
+    OBS,
+    SNAP_WIDTH,
+    observe,
+)
 from .fused_terms import (
     IP,
     P,
@@ -65,12 +78,14 @@ from .fused_terms import (
 )
 from .norms import norms
 from .path import LeaderPath, SplineTable, StraightLine, make_path
+from .props import d3_holds_3d
 from .schedule import OffsetSchedule
 
 nd = ti.types.ndarray()
 CHANGE_COLS = 7  # chg's columns (_change_row)
 MAX_N = 512  # all pairs up to here: at N = 1000 a fused F2 step cost as much CPU as a
 # per-step one (4.3 vs 4.2 ms, the per-step path on 2 threads), at N = 500 1.3 vs 2.2 ms
+SNAP_DOUBLES = 4_000_000  # snapshot buffer for 3D F2's D3 (32 MB), cut into launches above
 # Why a replica stopped (iprm[IP.CAUSE]), as the per-step path words it: its step check
 # (0, 1), or its grid's check of the positions it buckets (2, 3; kernels/space/grid.py), which
 # runs first at every step and RK4 stage. Cause 3 is `runaway_cause` of prm[P.EXTENT].
@@ -91,7 +106,8 @@ def advance_kernel(rk4: bool, dim: int):
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, h0: ti.i32, aoff: nd, ooff: nd, prm: nd, iprm: nd,
                 chg: nd, inforce: nd, forms: nd, lead: nd, pos: nd, ps: nd, kk: nd, y: nd,
-                deg: nd, parent: nd, ang: nd, gmax: nd, gcnt: nd, obs: nd):
+                deg: nd, parent: nd, ang: nd, gmax: nd, gcnt: nd, obs: nd, snap: nd,
+                sbase: nd):
         for t in range((aoff.shape[0] - 1) * SPREAD):
             if t % SPREAD == 0:  # one replica per CPU task
                 b = t // SPREAD
@@ -101,6 +117,7 @@ def advance_kernel(rk4: bool, dim: int):
                 every = iprm[b, IP.EVERY]
                 dt = prm[b, P.DT]
                 per = ti.static(2 if rk4 else 1)
+                iprm[b, IP.SNAP0] = iprm[b, IP.NOBS]  # the snapshot buffer's row 0
                 s = s0
                 while s < s1 and s <= steps and iprm[b, IP.BAD] < 0:
                     h = s * per
@@ -109,9 +126,11 @@ def advance_kernel(rk4: bool, dim: int):
                         break
                     if s % every == 0 or s == steps:
                         row = ooff[b] + iprm[b, IP.NOBS]
+                        at = sbase[b] + (iprm[b, IP.NOBS] - iprm[b, IP.SNAP0]) * n * SNAP_WIDTH
                         iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
                         observe(b, a0, n, s, h, h0, row, prm, iprm, chg, inforce, lead,
-                                 forms, pos, deg, parent, ang, gmax, gcnt, obs, dim)
+                                 forms, pos, deg, parent, ang, gmax, gcnt, obs, snap, at,
+                                 dim)
                     if s < steps:
                         coincident = 0
                         nonfinite = 0
@@ -218,7 +237,7 @@ class FormationBatch(FusedBatch):
         iprm = np.zeros((B, IP.size), dtype=np.int32)
         pos = np.zeros((total, dim))
         chg, inforce, forms = [], [], []
-        self.paths, self.f1 = [], []
+        self.paths, self.f1, self.snap = [], [], []
         for b, sc in enumerate(scenarios):
             p: FormationParams = sc.model  # type: ignore[assignment]
             n, d = sc.n_agents, sc.neighbours.radius
@@ -234,19 +253,21 @@ class FormationBatch(FusedBatch):
             self.paths.append(path)
             f1 = p.design == "F1"
             self.f1.append(f1)
+            self.snap.append(dim == 3 and not f1)  # D3 the host's (props.d3_holds_3d)
             a0 = int(self.aoff[b])
             pos[a0:a0 + n] = init.positions
             prm[b, :] = self._params(sc, path)
             iprm[b, :] = [sc.time.steps, sc.recording.observables_every, -1, 0, 0,
                           F_KINDS[p.attraction.kind], G_KINDS[p.repulsion.kind], int(f1),
                           int(isinstance(p.path, SplinePath)), len(chg), len(p.schedule),
-                          len(inforce), len(forms)]
+                          len(inforce), len(forms), int(self.snap[-1]), 0]
             if f1:
                 sched = OffsetSchedule(p.formation, p.schedule, n, d, dim)
                 chg.extend(_change_row(c, dim) for c in p.schedule)
                 inforce.extend([k, *m.ravel()] for k, m in sched.in_force)
                 forms.extend(row for k in sched.stored for row in k)
         self.steps = iprm[:, IP.STEPS].copy()
+        sbase = self._snapshots(ns, rows)
 
         def arr(a, shape, dtype=float) -> ti.Ndarray:
             a = np.asarray(a, dtype=runtime.real() if dtype is float else np.int32)
@@ -269,12 +290,29 @@ class FormationBatch(FusedBatch):
             gcnt=ti.ndarray(i32, shape=total),
             obs=arr(np.zeros((int(self.ooff[-1]), N_OBS)), None),
             vel=ti.ndarray(float, shape=(total, dim)),
+            snap=ti.ndarray(float, shape=max(int(sbase[-1]), 1)), sbase=arr(sbase, None, i32),
         )
         self.splines = [b for b, sc in enumerate(scenarios)
                         if isinstance(sc.model.path, SplinePath)]
         self.tables = {b: SplineTable(self.paths[b]) for b in self.splines}
         self.last_p: dict[int, tuple[int, np.ndarray]] = {}  # b: (h, p) of the last row
         self.now = np.zeros(B, dtype=np.int64)  # each replica's current step
+
+    def _snapshots(self, ns: list[int], rows: list[int]) -> np.ndarray:
+        """Size the snapshot buffer: K observation rows per snapshot replica per launch,
+        and launches of at most `chunk` steps (None: no snapshots, one launch a window).
+        Returns each replica's first slot in it (also self.sbase)."""
+        agents = sum(n for n, on in zip(ns, self.snap, strict=True) if on)
+        self.K = max(3, min(max(rows), SNAP_DOUBLES // max(SNAP_WIDTH * agents, 1)))
+        # a launch of chunk steps observes at most chunk / every + 2 rows (the last step)
+        everies = [sc.recording.observables_every
+                   for sc, on in zip(self.scenarios, self.snap, strict=True) if on]
+        self.chunk = max(1, (self.K - 2) * min(everies)) if everies else None
+        self.d3 = [np.zeros(r) for r in rows]
+        sizes = [self.K * SNAP_WIDTH * n if on else 0
+                 for n, on in zip(ns, self.snap, strict=True)]
+        self.sbase = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
+        return self.sbase
 
     def _params(self, sc: Scenario, path: LeaderPath) -> np.ndarray:
         """Replica `sc`'s row of prm (a spline's timing is the host's: its S, Q, E unused)."""
@@ -323,14 +361,47 @@ class FormationBatch(FusedBatch):
         return held
 
     def advance(self, s0: int, s1: int) -> None:
-        """Advance every replica from step s0 towards s1 (each stops at its own end)."""
+        """Advance every replica from step s0 towards s1 (each stops at its own end), in
+        launches of at most `chunk` steps while D3 snapshots are taken."""
         self.invalidate()
+        step = s1 - s0 if self.chunk is None else self.chunk
+        for c0 in range(s0, s1, step):
+            c1 = min(c0 + step, s1)
+            self._launch(c0, c1)
+            if self.chunk is not None:
+                self._d3()
+        self.now = np.minimum(s1, self.steps)
+
+    def _launch(self, s0: int, s1: int) -> None:
+        """One kernel launch: every replica from step s0 towards s1."""
         a = self.args
         self.advance_k(s0, s1, s0 * self.per, a["aoff"], a["ooff"], a["prm"], a["iprm"],
                        a["chg"], a["inforce"], a["forms"], self._lead_table(s0, s1),
                        a["pos"], a["ps"], a["kk"], a["y"], a["deg"], a["parent"], a["ang"],
-                       a["gmax"], a["gcnt"], a["obs"])
-        self.now = np.minimum(s1, self.steps)
+                       a["gmax"], a["gcnt"], a["obs"], a["snap"], a["sbase"])
+
+    def _d3(self) -> None:
+        """D3 of the observations the last launch took (rows SNAP0 .. NOBS) of each 3D F2
+        replica, from its snapshots with the per-step path's LP (props.d3_holds_3d); r_0 is
+        the row's leader position, the kernel's p(t)."""
+        iprm = self.status()
+        snap = obs = None
+        lead = [OBS.index(c) for c in ("leader_x", "leader_y", "leader_z")]
+        for b, on in enumerate(self.snap):
+            r0, r1 = int(iprm[b, IP.SNAP0]), int(iprm[b, IP.NOBS])
+            if not on or r1 == r0:
+                continue
+            if snap is None:
+                snap, obs = self.args["snap"].to_numpy(), self.args["obs"].to_numpy()
+            sc = self.scenarios[b]
+            n = sc.n_agents
+            s = snap[self.sbase[b]:self.sbase[b] + (r1 - r0) * n * SNAP_WIDTH]
+            s = s.reshape(r1 - r0, n, SNAP_WIDTH)
+            p = obs[self.ooff[b] + r0:self.ooff[b] + r1][:, lead]
+            tol = sc.model.leader_tolerance or sc.neighbours.radius / 100.0
+            for r in range(r1 - r0):
+                self.d3[b][r0 + r] = d3_holds_3d(s[r, :, :3] - p[r], s[r, :, 3].astype(int),
+                                                 tol)
 
     def end_at(self, step: int) -> None:
         super().end_at(step)
@@ -341,7 +412,10 @@ class FormationBatch(FusedBatch):
         rows = self.host("obs")[o0:o0 + iprm[b, IP.NOBS]]
         keep = COMMON + (COMMON_3D if self.dim == 3 else ()) + (
             F1_OBS if self.f1[b] else F2_OBS)
-        return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
+        out = {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
+        if self.snap[b]:
+            out["D3"] = self.d3[b][:len(rows)].copy()
+        return out
 
     def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
         a0, a1 = self.aoff[b], self.aoff[b + 1]
@@ -391,8 +465,6 @@ class FormationBatch(FusedBatch):
         if n < 2 or n > MAX_N or (p.integrator == "euler" and cap is not None
                                   and 9 * n > cap):
             return None
-        if dim == 3 and p.design == "F2":
-            return None  # its D3 is an LP (props.surrounds_3d), the host's
         return ("formation", p.integrator, dim)
 
 

@@ -1,7 +1,9 @@
 """The fused M4 path's observation: every observable of the per-step path (FormationKernel
 .observe, props' D1-D3) of one replica's state, into one row of its buffer; in 3D also
-`leader_z` and `centroid_z`. D3 is the 2D angular-gap test: F2 in 3D (D3 an LP,
-props.surrounds_3d) stays on the per-step path."""
+`leader_z` and `centroid_z`. D3 in 2D is the angular-gap test, here; in 3D it is a linear
+program per component (props.surrounds_3d), the host's: the row leaves it 0 and writes the
+agents' positions and component labels into the snapshot buffer, from which
+`FormationBatch` fills it after the launch."""
 
 import numpy as np
 import taichi as ti
@@ -33,6 +35,7 @@ COMMON = OBS[1:14]
 COMMON_3D = ("leader_z", "centroid_z")  # after COMMON, as the per-step path orders them
 F1_OBS = ("formation_error", "formation_error_max", "lag", "V1")
 F2_OBS = ("V2", "D1", "D2", "D3", "isolated", "components")
+SNAP_WIDTH = 4  # a snapshot row per agent (3D F2): x, y, z, its component's label
 
 
 
@@ -42,8 +45,10 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
              chg: ti.template(), inforce: ti.template(), lead: ti.template(),
              forms: ti.template(), pos: ti.template(), deg: ti.template(),
              parent: ti.template(), ang: ti.template(), gmax: ti.template(),
-             gcnt: ti.template(), obs: ti.template(), dim: ti.template()):
-    """The observables of X(s) (time index h) into obs[row]: the columns of OBS."""
+             gcnt: ti.template(), obs: ti.template(), snap: ti.template(), at,
+             dim: ti.template()):
+    """The observables of X(s) (time index h) into obs[row]: the columns of OBS; a 3D F2
+    replica's positions and labels into snap from `at` on (its D3 the host's)."""
     p, q, ma, mb, ka, kb = leader_state(b, h, h0, prm, iprm, chg, inforce, lead, dim)
     fk = iprm[b, IP.FKIND]
     fa = prm[b, P.FA]
@@ -115,7 +120,8 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
             rel = xi - p
             e = ti.sqrt(rel.dot(rel))
             fsum += attraction_energy(e, fk, fa, fb)
-            ang[i] = ti.atan2(rel[1], rel[0])
+            if ti.static(dim == 2):
+                ang[i] = ti.atan2(rel[1], rel[0])
             if e < lead_d:
                 lead_d = e
                 lead_k = i
@@ -144,7 +150,7 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
         obs[row, 15] = emax
         obs[row, 16] = lag
         obs[row, 17] = fsum + 0.5 * gsum
-    elif ti.static(dim == 2):  # F2 in 3D is not fused (FormationBatch.batch_key)
+    else:
         obs[row, 18] = fsum + 0.5 * gsum
         obs[row, 19] = ti.cast(ti.sqrt(near) >= prm[b, P.COLLIDE], float)  # D1
         if lead_d > tol:
@@ -159,41 +165,63 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
         obs[row, 20] = ti.cast(iso == 0, float)  # D2
         obs[row, 22] = iso
         obs[row, 23] = comps
-        # D3 (props.d3_holds): per component, the counter-clockwise gaps between
-        # the far agents' directions from r_0, in (angle, id) order; the successor is
-        # found by a scan (O(n * component size), small at these N).
-        for k in range(a0, a0 + n):
-            pk = pos[k, 0] - p[0]
-            qk = pos[k, 1] - p[1]
-            if ti.sqrt(pk * pk + qk * qk) > tol:
-                root = find_serial(parent, k)
-                best = ti.math.inf
-                best_m = -1
-                first = ti.math.inf
-                first_m = -1
-                for m in range(a0, a0 + n):
-                    pm = pos[m, 0] - p[0]
-                    qm = pos[m, 1] - p[1]
-                    if ti.sqrt(pm * pm + qm * qm) > tol and find_serial(parent, m) == root:
-                        am = ang[m]
-                        if am < first or (am == first and m < first_m):
-                            first = am
-                            first_m = m
-                        after = am > ang[k] or (am == ang[k] and m > k)
-                        if after and (am < best or (am == best and m < best_m)):
-                            best = am
-                            best_m = m
-                gap = best - ang[k]
-                if best_m < 0:
-                    gap = first + TWO_PI - ang[k]
-                gmax[root] = ti.max(gmax[root], gap)
-                if gap > np.pi - 1e-9:
-                    gcnt[root] = gcnt[root] + 1
-        d3 = 1.0
-        for k in range(a0, a0 + n):
-            if gmax[k] >= 0.0:  # a root with far agents
-                inside = gmax[k] < np.pi - 1e-9
-                on_line = gcnt[k] == 2 and gmax[k] <= np.pi + 1e-9
-                if not (inside or on_line):
-                    d3 = 0.0
-        obs[row, 21] = d3
+        if ti.static(dim == 2):
+            obs[row, 21] = surrounds_2d(a0, n, p, tol, pos, parent, ang, gmax, gcnt)
+        elif iprm[b, IP.SNAP] != 0:
+            snapshot(a0, n, at, pos, parent, snap)
+
+
+@ti.func
+def snapshot(a0, n, at, pos: ti.template(), parent: ti.template(), snap: ti.template()):
+    """Each agent's position and component label (its root, relative to a0) from snap[at] on:
+    the host's D3 in 3D (props.d3_holds_3d)."""
+    for k in range(a0, a0 + n):
+        base = at + (k - a0) * SNAP_WIDTH
+        for c in ti.static(range(3)):
+            snap[base + c] = pos[k, c]
+        snap[base + 3] = ti.cast(find_serial(parent, k) - a0, float)
+
+
+@ti.func
+def surrounds_2d(a0, n, p, tol, pos: ti.template(), parent: ti.template(),
+                 ang: ti.template(), gmax: ti.template(), gcnt: ti.template()) -> float:
+    """D3 in 2D (1.0 or 0.0): every component's far agents leave no angular gap around
+    r_0 = p larger than pi (props.surrounds_2d)."""
+    # D3 (props.d3_holds): per component, the counter-clockwise gaps between
+    # the far agents' directions from r_0, in (angle, id) order; the successor is
+    # found by a scan (O(n * component size), small at these N).
+    for k in range(a0, a0 + n):
+        pk = pos[k, 0] - p[0]
+        qk = pos[k, 1] - p[1]
+        if ti.sqrt(pk * pk + qk * qk) > tol:
+            root = find_serial(parent, k)
+            best = ti.math.inf
+            best_m = -1
+            first = ti.math.inf
+            first_m = -1
+            for m in range(a0, a0 + n):
+                pm = pos[m, 0] - p[0]
+                qm = pos[m, 1] - p[1]
+                if ti.sqrt(pm * pm + qm * qm) > tol and find_serial(parent, m) == root:
+                    am = ang[m]
+                    if am < first or (am == first and m < first_m):
+                        first = am
+                        first_m = m
+                    after = am > ang[k] or (am == ang[k] and m > k)
+                    if after and (am < best or (am == best and m < best_m)):
+                        best = am
+                        best_m = m
+            gap = best - ang[k]
+            if best_m < 0:
+                gap = first + TWO_PI - ang[k]
+            gmax[root] = ti.max(gmax[root], gap)
+            if gap > np.pi - 1e-9:
+                gcnt[root] = gcnt[root] + 1
+    d3 = 1.0
+    for k in range(a0, a0 + n):
+        if gmax[k] >= 0.0:  # a root with far agents
+            inside = gmax[k] < np.pi - 1e-9
+            on_line = gcnt[k] == 2 and gmax[k] <= np.pi + 1e-9
+            if not (inside or on_line):
+                d3 = 0.0
+    return d3

@@ -15,8 +15,10 @@ from .forces import F_KINDS, G_KINDS
 # A straight path's start S, velocity Q and end E take 3 slots each (2D uses the first two).
 P = Slots("R2", "D", "D2", "KG", "FA", "FB", "DT", "TSTEP", "T_ARR", "COLLIDE", "TOL",
           "LAG_SIGN", "CELL", "EXTENT", S=3, Q=3, E=3)
+# SNAP: whether the replica's observations are snapshot for the host's D3 (F2 in 3D), SNAP0
+# its observation count when the current launch began (the snapshot buffer's row 0).
 IP = Slots("STEPS", "EVERY", "BAD", "CAUSE", "NOBS", "FKIND", "GKIND", "F1", "SPLINE", "C0", "NC",
-          "I0", "F0")
+          "I0", "F0", "SNAP", "SNAP0")
 
 
 @ti.func
