@@ -19,15 +19,6 @@ from flocklab.schemas.formation import FormationChange, NamedFormation, SplinePa
 D = 20.0
 
 
-@pytest.fixture(params=["fused", "per_step"])
-def engine_path(request, monkeypatch, taichi_cpu):
-    """Run the test on both engine paths: the fused small-N one (default at these sizes)
-    and the per-step one (forced by lowering the fused path's size limit)."""
-    if request.param == "per_step":
-        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
-    return request.param
-
-
 class Frames:
     """A FrameSink keeping every frame (small runs only)."""
 
@@ -160,12 +151,12 @@ CASES = {
 
 
 @pytest.mark.parametrize("name", list(CASES))
-def test_matches_brute_force_step_by_step(engine_path, name):
+def test_matches_brute_force_step_by_step(path, name):
     m = CASES[name]
     sc = scenario(m, obs_every=40)
     result, sink = run(sc)
     assert result.status == "completed", result.error
-    assert result.extra["engine_path"] == engine_path
+    assert result.extra["engine_path"] == path
     full = sc.model.model_dump(mode="json")
     x = sink.pos[0].copy()
     p0 = x.mean(axis=0)
@@ -178,7 +169,7 @@ def test_matches_brute_force_step_by_step(engine_path, name):
         assert np.abs(sink.pos[step + 1] - x).max() <= 1e-10 * scale, (name, step)
 
 
-def test_observables_match_the_reference(engine_path):
+def test_observables_match_the_reference(path):
     """V1 (eq. 10), the formation error with the lag of eq. 8, speeds and the minimum
     distance, recomputed independently from the final frame."""
     m = dict(CASES["F1-linear-rotate"], schedule=[])
@@ -215,7 +206,7 @@ def test_observables_match_the_reference(engine_path):
 
 
 @pytest.mark.parametrize("sign, expected", [("eq8", 0.0), ("prop3.2", 2 * 3.0 / 2.0)])
-def test_linear_f_settles_at_the_lag_of_eq8(engine_path, sign, expected):
+def test_linear_f_settles_at_the_lag_of_eq8(path, sign, expected):
     """Constant-velocity leader, linear f: r_i - r_id -> a = -q/k (eq. 8); the lag_sign
     choice moves only the reference point of the formation error (to +q/k)."""
     q = np.array([3.0, 0.0])
@@ -235,7 +226,7 @@ def test_linear_f_settles_at_the_lag_of_eq8(engine_path, sign, expected):
 
 
 @pytest.mark.parametrize("design", ["F1", "F2"])
-def test_linear_f_centroid_obeys_dc_dt(engine_path, design):
+def test_linear_f_centroid_obeys_dc_dt(path, design):
     """Repulsion comes in opposite pairs and the offsets have mean zero, so with linear f the
     centroid follows dc/dt = k (r_0 - c) exactly; Euler: c' = c + dt k (p(t) - c)."""
     m = dict(design=design, attraction={"kind": "linear", "k": 0.8},
@@ -254,7 +245,7 @@ def test_linear_f_centroid_obeys_dc_dt(engine_path, design):
 
 
 @pytest.mark.parametrize("design", ["F1", "F2"])
-def test_lyapunov_never_increases_once_the_leader_is_still(engine_path, design):
+def test_lyapunov_never_increases_once_the_leader_is_still(path, design):
     m = dict(design=design, attraction={"kind": "quadratic", "c": 0.05},
              repulsion={"kind": "inverse", "k_g": 100.0},
              path={"kind": "straight", "target": [5.0, 5.0], "arrival_time": 0.5})
@@ -268,7 +259,7 @@ def test_lyapunov_never_increases_once_the_leader_is_still(engine_path, design):
     assert V[still][-1] < 0.9 * V[still][0]  # and it does decrease
 
 
-def test_rk4_is_far_more_accurate_than_euler(engine_path):
+def test_rk4_is_far_more_accurate_than_euler(path):
     m = dict(design="F2", attraction={"kind": "linear", "k": 1.0},
              repulsion={"kind": "inverse", "k_g": 20.0}, path=STRAIGHT)
     finals = {}
@@ -282,7 +273,7 @@ def test_rk4_is_far_more_accurate_than_euler(engine_path):
     assert err_rk4 < 1e-3 * err_euler
 
 
-def test_coincident_agents_stop_the_run_with_a_cause(engine_path):
+def test_coincident_agents_stop_the_run_with_a_cause(path):
     sc = scenario({"design": "F2", "path": STRAIGHT},
                   positions=[[0.0, 0.0], [0.0, 0.0], [5.0, 1.0]], every=0)
     result, _ = run(sc)
@@ -290,7 +281,7 @@ def test_coincident_agents_stop_the_run_with_a_cause(engine_path):
     assert result.error["step"] == 0 and "same position" in result.error["cause"]
 
 
-def test_huge_dt_is_reported_as_divergence(engine_path):
+def test_huge_dt_is_reported_as_divergence(path):
     sc = scenario({"design": "F2", "path": STRAIGHT, "attraction": {"kind": "quadratic"}},
                   N=30, dt=1e6, steps=50, every=0)
     result, _ = run(sc)
@@ -481,7 +472,7 @@ def test_bad_scenario_blocks_are_rejected_clearly():
         Scenario.model_validate(dict(good, neighbours=None))
 
 
-def test_saturating_leader_too_fast_at_run_time(engine_path):
+def test_saturating_leader_too_fast_at_run_time(path):
     m = {"design": "F2", "attraction": {"kind": "saturating", "v_max": 3.0},
          "path": {"kind": "straight", "target": [400.0, 0.0], "arrival_time": 10.0}}
     with pytest.raises(ValueError, match="could never keep up"):

@@ -124,20 +124,11 @@ CASES = {
 }
 
 
-@pytest.fixture(params=["fused", "per_step"])
-def engine_path(request, monkeypatch, taichi_cpu):
-    """Run the test on both engine paths: the fused small-N one (default at these sizes)
-    and the per-step one (forced by lowering the fused path's size limit)."""
-    if request.param == "per_step":
-        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
-    return request.param
-
-
 @pytest.mark.parametrize("name", list(CASES))
-def test_matches_brute_force_step_by_step(engine_path, name):
+def test_matches_brute_force_step_by_step(path, name):
     sc, result, sink = run(doc(CASES[name]))
     assert result.status == "completed", result.error
-    assert result.extra["engine_path"] == engine_path
+    assert result.extra["engine_path"] == path
     m = sc.model.model_dump(mode="json")
     x = sink.pos[0].copy()
     assert x.shape == (12, 3)
@@ -152,12 +143,12 @@ def test_matches_brute_force_step_by_step(engine_path, name):
         assert np.abs(sink.pos[step + 1] - x).max() <= 1e-10 * scale, (name, step)
 
 
-def test_observables_match_the_reference(engine_path):
+def test_observables_match_the_reference(path):
     """V1, the formation error with the lag of eq. 8, the speeds, the minimum distance and
     the z components, recomputed from the final frame."""
     m = dict(CASES["F1-linear-rotate-axis"], schedule=[])
     sc, result, sink = run(doc(m, steps=30))
-    assert result.extra["engine_path"] == engine_path
+    assert result.extra["engine_path"] == path
     x, v = sink.pos[-1], sink.vel[-1]
     full = sc.model.model_dump(mode="json")
     p0 = sink.pos[0].mean(axis=0)

@@ -267,6 +267,25 @@ CHAIN = {2: ({"kind": "named", "shape": "wedge"}, SCHEDULE, STRAIGHT, SPLINE),
              STRAIGHT_3D, SPLINE_3D)}
 
 
+def on_both_paths(sc, monkeypatch):
+    """(result, frames) of the fused path, then of the per-step path; every observable of
+    the one within 1e-12 of the other's."""
+    runs = []
+    for name in ("fused", "per_step"):
+        if name == "per_step":
+            monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
+        sink = Frames()
+        res = kernels.run(sc, sink=sink)
+        assert res.extra["engine_path"] == name and res.status == "completed", res.error
+        runs.append((res, sink))
+    (a, _), (b, _) = runs
+    assert a.observables.keys() == b.observables.keys()
+    for k in a.observables:
+        np.testing.assert_allclose(a.observables[k], b.observables[k], rtol=1e-12,
+                                   atol=1e-12, err_msg=k)
+    return runs
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("integrator", ["euler", "rk4"])
 def test_both_paths_agree_through_a_chain_of_formation_changes(taichi_cpu, monkeypatch,
@@ -279,19 +298,7 @@ def test_both_paths_agree_through_a_chain_of_formation_changes(taichi_cpu, monke
              schedule=schedule, integrator=integrator)
     sc = scenario_in(dim, m, N=9, steps=40, every=8, arrays=("position", "velocity"),
                      obs_every=3)
-    runs = {}
-    for name in ("fused", "per_step"):
-        if name == "per_step":
-            monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
-        sink = Frames()
-        res = kernels.run(sc, sink=sink)
-        assert res.extra["engine_path"] == name and res.status == "completed"
-        runs[name] = res, sink
-    (a, fa), (b, fb) = runs["fused"], runs["per_step"]
-    assert a.observables.keys() == b.observables.keys()
-    for k in a.observables:
-        np.testing.assert_allclose(a.observables[k], b.observables[k], rtol=1e-12,
-                                   atol=1e-12, err_msg=k)
+    (a, fa), (_, fb) = on_both_paths(sc, monkeypatch)
     assert fa.steps == fb.steps == [*range(0, 40, 8), 40]
     for x, y in zip(fa.frames, fb.frames, strict=True):
         for k in x:
@@ -332,19 +339,7 @@ def test_both_paths_agree_on_f2_in_3d(taichi_cpu, monkeypatch, integrator, case)
     values."""
     m, kw = F2_3D[case]
     sc = scenario_in(3, dict(m, integrator=integrator), every=20, **kw)
-    runs = {}
-    for name in ("fused", "per_step"):
-        if name == "per_step":
-            monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
-        sink = Frames()
-        res = kernels.run(sc, sink=sink)
-        assert res.extra["engine_path"] == name and res.status == "completed", res.error
-        runs[name] = res, sink
-    (a, fa), (b, fb) = runs["fused"], runs["per_step"]
-    assert a.observables.keys() == b.observables.keys()
-    for k in a.observables:
-        np.testing.assert_allclose(a.observables[k], b.observables[k], rtol=1e-12,
-                                   atol=1e-12, err_msg=k)
+    (a, fa), (b, fb) = on_both_paths(sc, monkeypatch)
     for k in ("D1", "D2", "D3", "isolated", "components"):
         assert np.array_equal(a.observables[k], b.observables[k]), k
     assert set(a.observables["D3"]) == {0.0, 1.0}
