@@ -4,6 +4,7 @@
                                                 # and the 10^4-step presets, both paths
     python -m bench.small_n_flocking --sizes    # the per-N table only
     python -m bench.small_n_flocking --sizes --dim 3   # the same flocks in 3D
+    python -m bench.small_n_flocking --m3-3d    # tanner-obstacles made 3D at N = 100
 
 One JSON line per measurement: wall and CPU time (`time.process_time`) per step, and the
 load average beside them (the machine is shared). Scenarios are preset-like: tjp-switching
@@ -11,6 +12,8 @@ load average beside them (the machine is shared). Scenarios are preset-like: tjp
 every 10 steps, no frames, one thread; compile and kernel loading excluded by a warm-up run.
 `--dim 3`: the same presets in 3D, the initial box a cube holding the preset's agents per
 unit area as agents per unit volume.
+`--m3-3d`: tanner-obstacles in 3D (its wall of point obstacles at z = 0, the destination at
+the origin), N agents on a jittered cubic lattice of spacing 1.5 by the preset's start.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import math
 import os
 import time
 
@@ -42,6 +46,26 @@ def preset_like(name: str, n: int, steps: int, dim: int = 2) -> Scenario:
     return Scenario.model_validate(spec)
 
 
+def tanner_3d(n: int, steps: int) -> Scenario:
+    """tanner-obstacles in 3D: the obstacles and destination at z = 0, a jittered cubic
+    lattice of N agents (spacing 1.5, speeds below 0.1) from (-4.5, -4.5, 0) - m / 2, m the
+    agents along an edge: at N = 100 most of them pass the wall and reach V <= V_min
+    within 3000 steps."""
+    spec = copy.deepcopy(PRESETS["tanner-obstacles"].build())
+    model = spec["model"]
+    model["obstacles"] = [[x, y, 0.0] for x, y in model["obstacles"]]
+    model["destination"] = [*model["destination"], 0.0]
+    side = math.ceil(n ** (1 / 3) - 1e-9)
+    spec["space"]["dimension"] = 3
+    spec["initial"] = {"kind": "random", "N": n, "speed_range": [0.0, 0.1],
+                       "region": {"kind": "lattice", "spacing": 1.5, "jitter": 0.2,
+                                  "low": [-4.5 - side / 2, -4.5 - side / 2, -side / 2]}}
+    spec["time"]["steps"] = steps
+    spec["recording"] = {"every": 0, "observables_every": 10}
+    spec["threads"] = 1
+    return Scenario.model_validate(spec)
+
+
 def timed(sc: Scenario, fused: bool) -> dict:
     from flocklab import kernels
     from flocklab.kernels import engine
@@ -57,6 +81,7 @@ def timed(sc: Scenario, fused: bool) -> dict:
             "wall_s": round(wall, 4), "cpu_s": round(cpu, 4),
             "us_per_step_wall": round(1e6 * wall / sc.time.steps, 1),
             "us_per_step_cpu": round(1e6 * cpu / sc.time.steps, 1),
+            "agent_steps_per_s_cpu": round(sc.n_agents * sc.time.steps / cpu),
             "loadavg_1min": os.getloadavg()[0]}
 
 
@@ -65,10 +90,16 @@ def main() -> None:
     ap.add_argument("--sizes", action="store_true", help="the per-N table only")
     ap.add_argument("--dim", type=int, choices=(2, 3), default=2,
                     help="the flocks' dimension (the per-N table)")
+    ap.add_argument("--m3-3d", action="store_true", help="3D tanner-obstacles at N = 100 only")
     args = ap.parse_args()
     from flocklab.kernels import runtime
 
     runtime.ensure("cpu", 1)
+    if args.m3_3d:
+        for fused in (True, False):
+            row = timed(tanner_3d(100, 3000 if fused else 300), fused)
+            print(json.dumps({"scenario": "tanner-obstacles-3d", "N": 100, **row}), flush=True)
+        return
     for n in SIZES:
         for name in ("tjp-switching", "tjp-fixed"):
             for fused in (True, False):

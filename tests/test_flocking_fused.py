@@ -1,8 +1,8 @@
 """The fused small-N path of M2 and M3 (kernels/models/flocking/fused.py): a replica gives the
 same bits alone, in a batch, cut into any windows, and the same prefix when cancelled; it
-agrees with the per-step path; the engine picks the path from the scenario alone. M2 in 2D
-and 3D (all pairs, the 3x3x3 cells, hashed buckets); M3 in 2D (3D M3 takes the per-step
-path).
+agrees with the per-step path; the engine picks the path from the scenario alone. M2 and M3
+in 2D and 3D (all pairs, the 3x3x3 cells, hashed buckets; M3's point and sphere obstacles in
+the 3x3x3 cells of their own grid, damping, the adaptive radius).
 
 (The family runs on the plane only, so there is no periodic case.)"""
 
@@ -37,6 +37,19 @@ def with_recording(sc: Scenario, **recording) -> Scenario:
 
 def obstacles_world(n: int, seed: int, **model) -> Scenario:
     return m3_scenario(n=n, steps=60, seed=seed, **model)
+
+
+def obstacles_world_3d(n: int, seed: int, **model) -> Scenario:
+    """test_flocking_3d's point and sphere obstacles around a jittered cubic lattice of n."""
+    spec = m3_scenario_3d(steps=60, **model).model_dump(mode="json")
+    spec.update(initial=lattice_3d(n, 1.05, seed, speed=0.4), seed=seed)
+    return Scenario.model_validate(spec)
+
+
+# 64 point obstacles on a 4x4x4 lattice through the flock: a 4x4x4 obstacle grid, so an
+# agent folds the obstacles of its 3x3x3 cells.
+OBSTACLE_LATTICE = [[1.4 * i + 0.3, 1.4 * j + 0.2, 1.4 * k + 0.4]
+                    for i in range(4) for j in range(4) for k in range(4)]
 
 
 def in_3d(sc: Scenario, initial: dict | None = None) -> Scenario:
@@ -96,6 +109,14 @@ MIXES = {
         obstacles_world(12, 3, damping_region="below_vmin", radius_every=7),
         obstacles_world(20, 4, obstacles=[], discs=[], damping_region="everywhere"),
     ],
+    # 216 agents over a 6x6x6 lattice: 3x3x3 cells and more.
+    "mission-3d": [
+        obstacles_world_3d(12, 7),
+        obstacles_world_3d(216, 2, neighbour_search="auto", kappa=2.0),
+        obstacles_world_3d(27, 3, damping_region="below_vmin", radius_every=7),
+        obstacles_world_3d(20, 4, obstacles=[], discs=[], damping_region="everywhere"),
+        obstacles_world_3d(64, 5, obstacles=OBSTACLE_LATTICE, neighbour_search="grid"),
+    ],
 }
 
 
@@ -122,6 +143,8 @@ def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, mode):
 # buckets.
 AGREEMENT = {mode: max(mix, key=lambda s: s.n_agents) for mode, mix in MIXES.items()}
 AGREEMENT["switching-3d-hashed"] = MIXES["switching-3d"][-1]
+AGREEMENT["mission-3d-obstacle-lattice"] = MIXES["mission-3d"][-1]
+AGREEMENT["mission-3d-adaptive"] = MIXES["mission-3d"][0]
 
 
 @pytest.mark.parametrize("case", list(AGREEMENT))
@@ -147,14 +170,15 @@ def test_the_fused_path_agrees_with_the_per_step_path(taichi_cpu, monkeypatch, c
             np.testing.assert_allclose(f[k], g[k], rtol=1e-9, atol=1e-12, err_msg=k)
 
 
-@pytest.mark.parametrize("mode", ["switching", "switching-3d"])
+@pytest.mark.parametrize("mode", ["switching", "switching-3d", "mission-3d"])
 def test_windows_frames_and_snapshot_launches_do_not_change_a_bit(taichi_cpu, monkeypatch,
                                                                     fixed_windows, mode):
     sc = MIXES[mode][1]  # N = 100 (216 in 3D) in cells; lambda_2 from snapshots
+    steps = sc.time.steps
     whole = kernels.run(sc)
     sink = Frames()
     framed = kernels.run(with_recording(sc, every=7), sink=sink)
-    assert sink.steps == [*range(0, 30, 7), 30]
+    assert sink.steps == [*range(0, steps, 7), steps]
     fixed_windows(sc.n_agents * 3)  # windows of 3 steps
     cut = kernels.run(sc)
     monkeypatch.setattr(flocking_fused, "SNAP_DOUBLES", 1)  # lambda_2 every launch of 1 step
@@ -202,14 +226,17 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     mixed = [euler, rk4, MIXES["fixed"][0], euler, MIXES["mission"][0]]
     assert sorted(map(sorted, engine._batches(mixed))) == [[0, 3], [1], [2], [4]]
     assert kernels.run(rk4).extra["engine_path"] == "per_step"
-    # 3D: M2 fused (its own launches, apart from 2D), M3 on the per-step path
+    # 3D: M2 and M3 fused, in launches of their own, apart from 2D
     flat = MIXES["switching"][0]
     deep = MIXES["switching-3d"][0]
     assert engine.fused_batch(deep, "cpu") is flocking_fused.FlockingBatch
     assert engine.fused_batch(MIXES["fixed-3d"][0], "cpu") is flocking_fused.FlockingBatch
-    assert engine.fused_batch(m3_scenario_3d(steps=1), "cpu") is None
+    assert engine.fused_batch(m3_scenario_3d(steps=1), "cpu") is flocking_fused.FlockingBatch
+    assert engine.fused_batch(m3_scenario_3d(steps=1, radius_rule="min"), "cpu") is None
     assert sorted(map(sorted, engine._batches([flat, deep, flat, deep]))) == [[0, 2], [1, 3]]
-    assert kernels.run(m3_scenario_3d(steps=1)).extra["engine_path"] == "per_step"
+    mission = [MIXES["mission"][0], MIXES["mission-3d"][0], MIXES["mission"][1]]
+    assert sorted(map(sorted, engine._batches(mission))) == [[0, 2], [1]]
+    assert kernels.run(m3_scenario_3d(steps=1)).extra["engine_path"] == "fused"
 
 
 @pytest.mark.parametrize("dim", [2, 3])

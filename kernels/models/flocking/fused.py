@@ -21,14 +21,16 @@ Euler:
   3. M3 at s > 0, s % radius_every == 0: the adaptive radius of eq. 4, synchronously;
   4. u_i of eq. 3 (and paper 002's -grad V_i - c_d v_i), v' = v + dt u, r' = r + dt v'.
      A non-finite value stops the replica and records the step.
-M2 runs in 2D and 3D: the dimension `dim` is a compile-time parameter of the kernel (the law
-needs only |r_ij| and the vectors r_ij, v_ij, as in forces.py), and 2D compiles to the
-arithmetic it had before 3D. The 3D heading spread is the per-step path's (observe.py):
-twice the largest angle between a velocity's direction and the mean direction.
-M3 stays 2D here (its navigation function and obstacle grid are planar): `batch_key` sends
-a 3D M3 scenario to the per-step path.
-The mission potential folds the obstacles of the 3x3 cells of a per-replica obstacle grid
-(cells of side obstacle_range + the largest disc radius, as kernels/models/flocking/navigation.py).
+M2 and M3 run in 2D and 3D: the dimension `dim` is a compile-time parameter of the kernel
+(the law needs only |r_ij| and the vectors r_ij, v_ij, as in forces.py; paper 002's
+navigation function only |x - r_d|, |x - r_o| and their vectors, as in navigation.py), and
+2D compiles to the arithmetic it had before 3D. The 3D heading spread is the per-step
+path's (observe.py): twice the largest angle between a velocity's direction and the mean
+direction.
+The mission potential folds the point and disc (in 3D sphere) obstacles of the 3x3 (3x3x3)
+cells of a per-replica obstacle grid (cells of side obstacle_range + the largest disc
+radius, as kernels/models/flocking/navigation.py; numbered x fastest, then y, then z), for an
+agent inside the obstacles' bounding box grown by a cell.
 
 lambda_2 (switching, N <= lambda2_max_agents) needs an eigensolver: the kernel writes
 (r, R_i) at each observation step into a snapshot buffer and the host computes lambda_2
@@ -37,7 +39,7 @@ eigvalsh at N <= 32). A window holding more observations than the buffer is cut 
 several launches, which never changes a bit.
 
 Not on this path (`FlockingBatch.batch_key` returns None; the per-step path runs them):
-the `rk4` integrator, M3's `radius_rule: "min"`, and M3 in 3D.
+the `rk4` integrator and M3's `radius_rule: "min"`.
 """
 
 from functools import cache
@@ -70,9 +72,16 @@ MODES = {"fixed": 0, "switching": 1, "mission": 2}
 # Per-replica parameter slots: prm (f64) and iprm (i32).
 P = Slots("DT", "A", "C", "R", "R2", "CD", "VMIN", "STUCK2", "FLOOR", "DX", "DY", "RANGE",
          "LAMBDA", "KAPPA", "OBX0", "OBY0", "OBX1", "OBY1", "OX", "OY", "OW", "OCAP", "QC",
-         "SPAN")
+         "SPAN", "DZ", "OBZ0", "OBZ1", "OZ")
 IP = Slots("STEPS", "EVERY", "NOBS", "BAD", "CAUSE", "CELLS", "INCL", "REVERY", "ADAPT", "DAMP",
-          "ONX", "ONY", "OCOFF", "OM", "VPER", "VOFF", "HALVED", "GROWN", "SNAP", "SNAP0")
+          "ONX", "ONY", "OCOFF", "OM", "VPER", "VOFF", "HALVED", "GROWN", "SNAP", "SNAP0", "ONZ")
+# M3's slots by coordinate: the destination, the obstacle grid's origin and the bounding box
+# of the obstacles (grown by the cell) outside which no obstacle is within reach.
+DEST = (P.DX, P.DY, P.DZ)
+OORIGIN = (P.OX, P.OY, P.OZ)
+OLOW = (P.OBX0, P.OBY0, P.OBZ0)
+OHIGH = (P.OBX1, P.OBY1, P.OBZ1)
+OCELLS = (IP.ONX, IP.ONY, IP.ONZ)
 DAMPING = {"above_vmin": 1, "below_vmin": 2, "everywhere": 3}  # 0: none (M2)
 # Observable columns (energy: W or Q_reduced; q_constant: Q - Q_reduced).
 OBS = ("step", "mean_velocity_x", "mean_velocity_y", "velocity_disagreement",
@@ -300,51 +309,85 @@ def make_visit(pair, dim: int, by_id: bool = False):
 
 
 @ti.func
+def _fold_obstacle(acc, d, rho, rng, lam):
+    """Fold the obstacle at d = r_o - x (boundary radius rho; 0: a point) into
+    acc = (B, grad B, min delta) by the product rule (paper 002 p. 3:
+    beta_o = 1 - lambda e^2 / (e^2 + 1), e = delta_o - d_o, where delta_o^2 < d_o^2)."""
+    D = ti.static(d.n)
+    dist = ti.sqrt(d.dot(d))
+    delta = dist - rho
+    acc[D + 1] = ti.min(acc[D + 1], delta)
+    if delta * delta < rng * rng:  # m = 1; otherwise beta = 1
+        e = delta - rng
+        qq = e * e + 1.0
+        beta = 1.0 - lam * e * e / qq
+        dbeta = -2.0 * lam * e / (qq * qq)
+        g = (-dbeta / dist) * d  # grad_x beta = dbeta (x - r_o) / |x - r_o|
+        bb = acc[0]
+        for c in ti.static(range(D)):
+            acc[1 + c] = acc[1 + c] * beta + bb * g[c]
+        acc[0] = bb * beta
+    return acc
+
+
+@ti.func
+def _in_obstacle_box(b, x, prm: ti.template()):
+    """x lies in the obstacles' bounding box grown by a cell (outside it none is in reach)."""
+    inside = True
+    for c in ti.static(range(x.n)):
+        inside = inside & (prm[b, OLOW[c]] <= x[c]) & (x[c] <= prm[b, OHIGH[c]])
+    return inside
+
+
+@ti.func
+def _fold_obstacles(b, x, acc, prm: ti.template(), iprm: ti.template(), opos: ti.template(),
+                    orad: ti.template(), ostart: ti.template()):
+    """acc folded over the obstacles of the 3x3 (3x3x3) cells around x in replica b's
+    obstacle grid (cells numbered x fastest, then y, then z), rows contiguous along x."""
+    dim = ti.static(x.n)
+    zr = ti.static(1 if dim == 3 else 0)  # the planes around x's: -zr .. zr
+    w = prm[b, P.OW]
+    c0 = iprm[b, IP.OCOFF]
+    nx = iprm[b, IP.ONX]
+    ny = iprm[b, IP.ONY]
+    nz = iprm[b, IP.ONZ]
+    c = ti.Vector([ti.cast(ti.floor((x[a] - prm[b, OORIGIN[a]]) / w), ti.i32)
+                   for a in ti.static(range(dim))])
+    cz = 0
+    if ti.static(dim == 3):
+        cz = c[2]
+    xlo = ti.max(c[0] - 1, 0)
+    xhi = ti.min(c[0] + 1, nx - 1)
+    rng = prm[b, P.RANGE]
+    lam = prm[b, P.LAMBDA]
+    for dz in range(-zr, zr + 1):
+        plane = cz + dz
+        for dy in range(-1, 2):
+            row = c[1] + dy
+            if plane >= 0 and plane < nz and row >= 0 and row < ny and xlo <= xhi:
+                base = c0 + (plane * ny + row) * nx
+                for o in range(ostart[base + xlo], ostart[base + xhi + 1]):
+                    acc = _fold_obstacle(acc, _row(opos, o, 0, dim) - x, orad[o], rng, lam)
+    return acc
+
+
+@ti.func
 def navigation(b, x, prm: ti.template(), iprm: ti.template(), opos: ti.template(),
                orad: ti.template(), ostart: ti.template()):
-    """(V_i, dV/dx, dV/dy, min boundary distance) at x for replica b: paper 002's
-    navigation function (see kernels/models/flocking/navigation.py), the obstacles folded by the
-    product rule over the 3x3 cells of the replica's obstacle grid."""
-    acc = ti.math.vec4(1.0, 0.0, 0.0, FAR)
+    """(V_i, grad V_i, min boundary distance) at x (dim + 2 values) for replica b: paper
+    002's navigation function (see kernels/models/flocking/navigation.py) over point and
+    disc (sphere) obstacles, folded by the product rule."""
+    dim = ti.static(x.n)
+    acc = ti.Vector([1.0] + [0.0 for _ in ti.static(range(dim))] + [FAR], dt=float)
     if iprm[b, IP.OM] > 0:
-        inside = (prm[b, P.OBX0] <= x[0]) & (x[0] <= prm[b, P.OBX1]) & (prm[b, P.OBY0] <= x[1]) \
-            & (x[1] <= prm[b, P.OBY1])
-        if inside:
-            w = prm[b, P.OW]
-            nx = iprm[b, IP.ONX]
-            ny = iprm[b, IP.ONY]
-            c0 = iprm[b, IP.OCOFF]
-            cx = ti.cast(ti.floor((x[0] - prm[b, P.OX]) / w), ti.i32)
-            cy = ti.cast(ti.floor((x[1] - prm[b, P.OY]) / w), ti.i32)
-            xlo = ti.max(cx - 1, 0)
-            xhi = ti.min(cx + 1, nx - 1)
-            rng = prm[b, P.RANGE]
-            lam = prm[b, P.LAMBDA]
-            for dy in range(-1, 2):
-                row = cy + dy
-                if row >= 0 and row < ny and xlo <= xhi:
-                    base = c0 + row * nx
-                    for o in range(ostart[base + xlo], ostart[base + xhi + 1]):
-                        d = ti.math.vec2(opos[o, 0] - x[0], opos[o, 1] - x[1])
-                        dist = ti.sqrt(d.dot(d))
-                        delta = dist - orad[o]
-                        acc[3] = ti.min(acc[3], delta)
-                        if delta * delta < rng * rng:  # m = 1; otherwise beta = 1
-                            e = delta - rng
-                            qq = e * e + 1.0
-                            beta = 1.0 - lam * e * e / qq
-                            dbeta = -2.0 * lam * e / (qq * qq)
-                            g = (-dbeta / dist) * d
-                            bb = acc[0]
-                            acc[1] = acc[1] * beta + bb * g[0]
-                            acc[2] = acc[2] * beta + bb * g[1]
-                            acc[0] = bb * beta
+        if _in_obstacle_box(b, x, prm):
+            acc = _fold_obstacles(b, x, acc, prm, iprm, opos, orad, ostart)
     bsum = acc[0]
-    gb = ti.math.vec2(acc[1], acc[2])
-    y = ti.math.vec2(x[0] - prm[b, P.DX], x[1] - prm[b, P.DY])
+    gb = ti.Vector([acc[1 + c] for c in ti.static(range(dim))], dt=float)
+    y = x - ti.Vector([prm[b, DEST[c]] for c in ti.static(range(dim))], dt=float)
     a = y.dot(y)
     v = 0.0
-    g = ti.math.vec2(0.0)
+    g = _full(0.0, dim)
     kappa = prm[b, P.KAPPA]
     if kappa == 1.0:
         dd = a + bsum
@@ -356,7 +399,7 @@ def navigation(b, x, prm: ti.template(), iprm: ti.template(), opos: ti.template(
         v = a * dk
         gd = 2.0 * kappa * ti.pow(a, kappa - 1.0) * y + gb
         g = dk * 2.0 * y - (a / kappa) * (dk / dd) * gd
-    return ti.math.vec4(v, g[0], g[1], acc[3])
+    return ti.Vector([v] + [g[c] for c in ti.static(range(dim))] + [acc[dim + 1]], dt=float)
 
 
 @ti.func
@@ -465,10 +508,9 @@ def velocity_stats(row, a0, n, ps: ti.template(), lo: ti.template(), hi: ti.temp
 @cache
 def advance_kernel(mode: int, dim: int = 2):
     """The window kernel for one mode (fixed graph, switching (M2) or mission (M3)) and
-    dimension (M3: 2 only)."""
+    dimension (2 or 3)."""
     fixed = mode == MODES["fixed"]
     mission = mode == MODES["mission"]
-    assert dim == 2 or not mission, "M3's fused kernel is planar"
     X, V, RAD, HC, _ = columns(dim)
 
     @ti.func
@@ -674,15 +716,16 @@ def advance_kernel(mode: int, dim: int = 2):
             rmax = 0.0
             rsum = 0.0
             qc = 0.0
+            dest = ti.Vector([prm[b, DEST[c]] for c in ti.static(range(dim))], dt=float)
             for k in range(a0, a0 + n):
-                x = ti.math.vec2(ps[k, 0], ps[k, 1])
-                nv = ti.math.vec4(mis[k, 0], mis[k, 1], mis[k, 2], mis[k, 3])
-                msum += nv[0]
-                if nv[0] <= prm[b, P.VMIN]:
+                vk = mis[k, 0]
+                msum += vk
+                if vk <= prm[b, P.VMIN]:
                     inside += 1
-                mmax = ti.max(mmax, nv[0])
-                omin = ti.min(omin, nv[3])
-                dd = ti.sqrt((x[0] - prm[b, P.DX]) ** 2 + (x[1] - prm[b, P.DY]) ** 2)
+                mmax = ti.max(mmax, vk)
+                omin = ti.min(omin, mis[k, dim + 1])
+                y = _row(ps, k, X, dim) - dest
+                dd = ti.sqrt(y.dot(y))
                 dmean += dd
                 dfar = ti.max(dfar, dd)
                 r = ps[k, RAD]
@@ -690,9 +733,8 @@ def advance_kernel(mode: int, dim: int = 2):
                 rmax = ti.max(rmax, r)
                 rsum += r
                 qc += potentials.value(r * r, q[2], q[3])
-                csum[k, 0] = 0.0
-                csum[k, 1] = 0.0
-                csum[k, 2] = 0.0
+                for c in ti.static(range(dim + 1)):
+                    csum[k, c] = 0.0
             energy += msum  # eq. 5: + sum_i V_i
             obs[row, COL["q_constant"]] = 0.5 * (n - 1) * qc
             obs[row, COL["destination_distance_mean"]] = dmean / n
@@ -703,19 +745,19 @@ def advance_kernel(mode: int, dim: int = 2):
             obs[row, COL["radius_min"]] = rmin
             obs[row, COL["radius_mean"]] = rsum / n
             obs[row, COL["radius_max"]] = rmax
-            # Paper 002: each component synchronises on its own.
+            # Paper 002: each component synchronises on its own (csum: the velocity sum
+            # and member count of each component, at its root).
             for k in range(a0, a0 + n):
                 root = find_serial(parent, k)
-                csum[root, 0] = csum[root, 0] + ps[k, V]
-                csum[root, 1] = csum[root, 1] + ps[k, V + 1]
-                csum[root, 2] = csum[root, 2] + 1.0
+                for c in ti.static(range(dim)):
+                    csum[root, c] = csum[root, c] + ps[k, V + c]
+                csum[root, dim] = csum[root, dim] + 1.0
             dev = 0.0
             dev_max = 0.0
             for k in range(a0, a0 + n):
                 root = find_serial(parent, k)
-                cnt = csum[root, 2]
-                e = ti.math.vec2(ps[k, V] - csum[root, 0] / cnt,
-                                 ps[k, V + 1] - csum[root, 1] / cnt)
+                cnt = csum[root, dim]
+                e = _row(ps, k, V, dim) - _row(csum, root, 0, dim) / cnt
                 d2 = e.dot(e)
                 dev += d2
                 dev_max = ti.max(dev_max, d2)
@@ -793,10 +835,9 @@ def advance_kernel(mode: int, dim: int = 2):
                                 ps[k, HC + c] = ti.floor((pos[i, c] - o[c]) / w)
                     if ti.static(mission):  # V_i at r(s): read by all three passes below
                         for k in range(a0, a0 + n):
-                            nv = navigation(b, ti.math.vec2(ps[k, 0], ps[k, 1]), prm, iprm,
-                                            opos, orad, ostart)
-                            for c in ti.static(range(4)):
-                                mis[k, c] = nv[c]
+                            nv = navigation(b, _row(ps, k, X, dim), prm, iprm, opos, orad,
+                                            ostart)
+                            _put(mis, k, nv)
                     if graph:
                         row = ooff[b] + iprm[b, IP.NOBS]
                         obs[row, 0] = s
@@ -817,7 +858,8 @@ def advance_kernel(mode: int, dim: int = 2):
                                 grown = 0
                                 for k in range(a0, a0 + n):
                                     r = ps[k, RAD]
-                                    v2 = ps[k, V] * ps[k, V] + ps[k, V + 1] * ps[k, V + 1]
+                                    vk = _row(ps, k, V, dim)
+                                    v2 = vk.dot(vk)
                                     new = r
                                     if v2 < prm[b, P.STUCK2] and mis[k, 0] > prm[b, P.VMIN]:
                                         new = ti.max(0.5 * r, prm[b, P.FLOOR])
@@ -859,7 +901,7 @@ def advance_kernel(mode: int, dim: int = 2):
                                     u[c] = acc[c]
                                 u -= acc[dim] * vi
                             if ti.static(mission):
-                                u -= ti.math.vec2(mis[k, 1], mis[k, 2])
+                                u -= _row(mis, k, 1, dim)  # - grad V_i (eq. 3)
                                 damp = iprm[b, IP.DAMP]
                                 vm = mis[k, 0]
                                 if damp == 3 or (damp == 1 and vm > prm[b, P.VMIN]) or (
@@ -877,31 +919,34 @@ def advance_kernel(mode: int, dim: int = 2):
     return advance
 
 
-def _obstacle_grid(p) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, float]]:
-    """M3's obstacles in the row-major cells of a dense grid over their bounding box
-    (cells of side obstacle_range + the largest disc radius, widened until at most
-    4 M + 16 cells): (centres, radii, cell starts, geometry) in cell order."""
+def _obstacle_grid(p, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+    """M3's obstacles in the cells (x fastest, then y, then z) of a dense grid over their
+    bounding box (cells of side obstacle_range + the largest disc radius, widened until at
+    most 4 M + 16 cells): (centres, radii, cell starts, geometry) in cell order; geometry:
+    the cell side w, the cell reach cap, and per dimension the origin, the cells across and
+    the bounding box grown by cap (low, high)."""
     centers = np.array([*p.obstacles, *(d.center for d in p.discs)],
-                       dtype=np.float64).reshape(-1, 2)
+                       dtype=np.float64).reshape(-1, dim)
     radii = np.array([0.0] * len(p.obstacles) + [d.radius for d in p.discs])
     m = len(centers)
     cap = p.obstacle_range + (float(radii.max()) if m else 0.0)
-    if m == 0:
-        geo = dict(ox=0.0, oy=0.0, w=1.0, nx=1, ny=1, x0=0.0, y0=0.0, x1=-1.0, y1=-1.0,
-                   cap=cap)
+    if m == 0:  # an empty box: no agent is ever inside
+        geo = dict(origin=[0.0] * dim, w=1.0, cells=[1] * dim, low=[0.0] * dim,
+                   high=[-1.0] * dim, cap=cap)
         return centers, radii, np.zeros(2, dtype=np.int64), geo
     lo, hi = centers.min(axis=0), centers.max(axis=0)
     w = cap * widen()
     while (np.floor((hi - lo) / w) + 1).prod() > 4 * m + 16:
         w *= 2.0
-    nx, ny = (int(k) for k in np.floor((hi - lo) / w) + 1)
-    cx = np.minimum(np.floor((centers[:, 0] - lo[0]) / w).astype(np.int64), nx - 1)
-    cy = np.minimum(np.floor((centers[:, 1] - lo[1]) / w).astype(np.int64), ny - 1)
-    key = cx + nx * cy
+    cells = [int(k) for k in np.floor((hi - lo) / w) + 1]
+    key = np.zeros(m, dtype=np.int64)
+    for c in reversed(range(dim)):
+        at = np.minimum(np.floor((centers[:, c] - lo[c]) / w).astype(np.int64), cells[c] - 1)
+        key = key * cells[c] + at
     order = np.argsort(key, kind="stable")
-    start = np.concatenate([[0], np.cumsum(np.bincount(key, minlength=nx * ny))])
-    geo = dict(ox=lo[0], oy=lo[1], w=w, nx=nx, ny=ny, x0=lo[0] - cap, y0=lo[1] - cap,
-               x1=hi[0] + cap, y1=hi[1] + cap, cap=cap)
+    start = np.concatenate([[0], np.cumsum(np.bincount(key, minlength=int(np.prod(cells))))])
+    geo = dict(origin=list(lo), w=w, cells=cells, low=list(lo - cap), high=list(hi + cap),
+               cap=cap)
     return centers[order], radii[order], start, geo
 
 
@@ -940,7 +985,7 @@ def lambda2_rows(pos: np.ndarray, radii: np.ndarray | float, own: bool, inclusiv
 
 class FlockingBatch(FusedBatch):
     """The state of a batch of M2 or M3 replicas (any N, graph, radius, obstacles, steps
-    each; one mode: fixed graph, switching, or M3; one dimension: 2 or 3, M3 2 only),
+    each; one mode: fixed graph, switching, or M3; one dimension: 2 or 3),
     advanced window by window by `advance_kernel`."""
 
     dimensions = (2, 3)
@@ -1014,18 +1059,20 @@ class FlockingBatch(FusedBatch):
                 # 1/2 sum_i sum_{j != i} V(R), the constant part of Q (eq. 10)
                 prm[b, P.QC] = 0.5 * n * (n - 1) * p.potential.value(radius)
             if mission:
-                cen, orr, start, geo = _obstacle_grid(p)
+                cen, orr, start, geo = _obstacle_grid(p, dim)
                 prm[b, [P.CD, P.VMIN, P.STUCK2, P.FLOOR]] = [
                     p.c_d, p.V_min, p.stuck_speed**2, p.radius_floor]
                 lam_nav = (p.obstacle_range**2 + 1.0) / p.obstacle_range**2
-                prm[b, [P.DX, P.DY, P.RANGE, P.LAMBDA, P.KAPPA]] = [
-                    *p.destination, p.obstacle_range, lam_nav, p.kappa]
-                prm[b, [P.OBX0, P.OBY0, P.OBX1, P.OBY1, P.OX, P.OY, P.OW, P.OCAP]] = [
-                    geo["x0"], geo["y0"], geo["x1"], geo["y1"], geo["ox"], geo["oy"],
-                    geo["w"], geo["cap"]]
-                iprm[b, [IP.REVERY, IP.ADAPT, IP.DAMP, IP.ONX, IP.ONY, IP.OCOFF, IP.OM]] = [
+                prm[b, [P.RANGE, P.LAMBDA, P.KAPPA, P.OW, P.OCAP]] = [
+                    p.obstacle_range, lam_nav, p.kappa, geo["w"], geo["cap"]]
+                for slots, values in ((DEST, p.destination), (OORIGIN, geo["origin"]),
+                                      (OLOW, geo["low"]), (OHIGH, geo["high"])):
+                    prm[b, list(slots[:dim])] = values
+                iprm[b, IP.ONZ] = 1  # 2D: one plane
+                iprm[b, list(OCELLS[:dim])] = geo["cells"]
+                iprm[b, [IP.REVERY, IP.ADAPT, IP.DAMP, IP.OCOFF, IP.OM]] = [
                     p.radius_every, int(p.adaptive_radius), DAMPING[p.damping_region],
-                    geo["nx"], geo["ny"], n_ocell, len(cen)]
+                    n_ocell, len(cen)]
                 opos.append(cen)
                 orad.append(orr)
                 ostart.append(n_obst + start)
@@ -1063,11 +1110,11 @@ class FlockingBatch(FusedBatch):
             prm=arr(prm), iprm=arr(iprm, i32), pos=arr(pos), vel=arr(vel), rad=arr(rad),
             ps=scratch((total, columns(dim)[-1])), cell=scratch(total, i32),
             cstart=scratch(int(self.coff[-1]), i32), cidx=scratch(total, i32),
-            parent=scratch(total, i32), csum=scratch((total, 3)),
-            mis=scratch((total if mission else 1, 4)), arc_lo=scratch(total),
+            parent=scratch(total, i32), csum=scratch((total, dim + 1)),
+            mis=scratch((total if mission else 1, dim + 2)), arc_lo=scratch(total),
             arc_hi=scratch(total), ptr=arr(ptr_all.astype(np.int32), i32),
             idx=arr(cat(idx, 1, np.int32), i32),
-            opos=arr(np.concatenate(opos) if n_obst else np.zeros((1, 2))),
+            opos=arr(np.concatenate(opos) if n_obst else np.zeros((1, dim))),
             orad=arr(np.concatenate(orad) if n_obst else np.zeros(1)),
             ostart=arr(cat(ostart, 1, np.int32), i32),
             obs=arr(np.zeros((int(self.ooff[-1]), N_OBS))),
@@ -1195,11 +1242,11 @@ class FlockingBatch(FusedBatch):
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:
         """Scenarios with the same key share a launch; None (the per-step path) for the
-        rk4 integrator, M3's radius_rule "min" and M3 in 3D (its fused kernel is planar)."""
+        rk4 integrator and M3's radius_rule "min"."""
         p = scenario.model
         if p.integrator != "semi_implicit_euler":
             return None
         if p.kind == "flocking_obstacles":
-            planar_own = p.radius_rule == "own" and scenario.dimension == 2
-            return ("flocking_obstacles",) if planar_own else None
+            own = p.radius_rule == "own"
+            return ("flocking_obstacles", scenario.dimension) if own else None
         return ("flocking", p.topology, scenario.dimension)
