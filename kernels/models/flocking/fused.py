@@ -59,6 +59,7 @@ from ...space.initial import unit_rows
 from ...space.params import Slots
 from . import observe as fo
 from . import potentials
+from .navigation import fold_obstacle
 from .topology import build_edges, to_csr
 
 nd = ti.types.ndarray()
@@ -309,28 +310,6 @@ def make_visit(pair, dim: int, by_id: bool = False):
 
 
 @ti.func
-def _fold_obstacle(acc, d, rho, rng, lam):
-    """Fold the obstacle at d = r_o - x (boundary radius rho; 0: a point) into
-    acc = (B, grad B, min delta) by the product rule (paper 002 p. 3:
-    beta_o = 1 - lambda e^2 / (e^2 + 1), e = delta_o - d_o, where delta_o^2 < d_o^2)."""
-    D = ti.static(d.n)
-    dist = ti.sqrt(d.dot(d))
-    delta = dist - rho
-    acc[D + 1] = ti.min(acc[D + 1], delta)
-    if delta * delta < rng * rng:  # m = 1; otherwise beta = 1
-        e = delta - rng
-        qq = e * e + 1.0
-        beta = 1.0 - lam * e * e / qq
-        dbeta = -2.0 * lam * e / (qq * qq)
-        g = (-dbeta / dist) * d  # grad_x beta = dbeta (x - r_o) / |x - r_o|
-        bb = acc[0]
-        for c in ti.static(range(D)):
-            acc[1 + c] = acc[1 + c] * beta + bb * g[c]
-        acc[0] = bb * beta
-    return acc
-
-
-@ti.func
 def _in_obstacle_box(b, x, prm: ti.template()):
     """x lies in the obstacles' bounding box grown by a cell (outside it none is in reach)."""
     inside = True
@@ -367,7 +346,7 @@ def _fold_obstacles(b, x, acc, prm: ti.template(), iprm: ti.template(), opos: ti
             if plane >= 0 and plane < nz and row >= 0 and row < ny and xlo <= xhi:
                 base = c0 + (plane * ny + row) * nx
                 for o in range(ostart[base + xlo], ostart[base + xhi + 1]):
-                    acc = _fold_obstacle(acc, _row(opos, o, 0, dim) - x, orad[o], rng, lam)
+                    acc = fold_obstacle(acc, _row(opos, o, 0, dim) - x, orad[o], rng, lam)
     return acc
 
 

@@ -83,25 +83,33 @@ class ObstacleGrid:
 
 
 @ti.func
-def _obstacle_pair(i, k, d, acc, S: ti.template()):
-    """Fold obstacle k (d = r_o - x) into acc = (B, grad B, min delta)."""
-    orad, nav = ti.static(S[0], S[1])
+def fold_obstacle(acc, d, rho, rng, lam):
+    """Fold the obstacle at d = r_o - x (boundary radius rho; 0: a point) into
+    acc = (B, grad B, min delta) by the product rule (p. 3: beta_o = 1 - lambda e^2 /
+    (e^2 + 1), e = delta_o - d_o, where delta_o^2 < d_o^2). The per-step and the fused
+    path's fold."""
     D = ti.static(d.n)
     dist = ti.sqrt(d.dot(d))
-    delta = dist - orad[k]
+    delta = dist - rho
     acc[D + 1] = ti.min(acc[D + 1], delta)
-    rng = nav[NAV.RANGE]
     if delta * delta < rng * rng:  # m = 1; otherwise m = 0 and beta = 1
         e = delta - rng
         q = e * e + 1.0
-        beta = 1.0 - nav[NAV.LAMBDA] * e * e / q
-        dbeta = -2.0 * nav[NAV.LAMBDA] * e / (q * q)  # d beta / d delta
+        beta = 1.0 - lam * e * e / q
+        dbeta = -2.0 * lam * e / (q * q)  # d beta / d delta
         g = (-dbeta / dist) * d  # grad_x beta = dbeta (x - r_o) / |x - r_o|
         b = acc[0]
         for c in ti.static(range(D)):
             acc[1 + c] = acc[1 + c] * beta + b * g[c]
         acc[0] = b * beta
     return acc
+
+
+@ti.func
+def _obstacle_pair(i, k, d, acc, S: ti.template()):
+    """Fold obstacle k (d = r_o - x) into acc = (B, grad B, min delta)."""
+    orad, nav = ti.static(S[0], S[1])
+    return fold_obstacle(acc, d, orad[k], nav[NAV.RANGE], nav[NAV.LAMBDA])
 
 
 _visit_obstacles = {dim: make_visitor(_obstacle_pair, dim=dim) for dim in (2, 3)}
