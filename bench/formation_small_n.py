@@ -2,13 +2,16 @@
 
     python -m bench.formation_small_n            # N = 5, 20, 100, 1000, then a preset
     python -m bench.formation_small_n --sizes 5 100 --preset-steps 0
+    python -m bench.formation_small_n --dim 3 --preset-steps 0   # the same in 3D
 
 Single runs: the xi-abed-sim3 scenario (F2, linear f, inverse g, d = 20, dt = 0.01,
 observables every 20 steps, no frames) with N agents on a box of side 50 sqrt(N / 100)
 (the preset's density) and `max_exact_candidates: null` (always exact, so that N = 1000
 may take the fused path too), through `kernels.run`, compile excluded by a warm-up run.
 The per-step path is forced with `kernels.engine.FUSED_MAX_N = 0`. Then a preset
-(xi-abed-sim1 by default) at 10^4 steps on both paths. Wall and CPU time
+(xi-abed-sim1 by default) at 10^4 steps on both paths. `--dim 3`: the agents in a cube of
+side 50 (N / 100)^(1/3), the leader's target (-40, -40, -40); F2's D3 is then the host's
+linear program on the fused path too (kernels/models/formation/fused.py). Wall and CPU time
 (`time.process_time`, all threads) with the load average beside them: the machine is
 shared.
 """
@@ -17,19 +20,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import time
 
 
-def scenario(n: int, steps: int):
+def scenario(n: int, steps: int, dim: int = 2):
     from flocklab.schemas import Scenario, get_preset
 
     base = get_preset("xi-abed-sim3").model_dump(mode="json")
-    side = 50.0 * math.sqrt(n / 100.0)
+    side = 50.0 * (n / 100.0) ** (1 / dim)
     base["model"]["max_exact_candidates"] = None
+    base["model"]["path"]["target"] = [-40.0] * dim
+    base["space"]["dimension"] = dim
     base["initial"] = {"kind": "random", "N": n,
-                       "region": {"kind": "box", "low": [0.0, 0.0], "high": [side, side]}}
+                       "region": {"kind": "box", "low": [0.0] * dim, "high": [side] * dim}}
     base["time"]["steps"] = steps
     base["recording"] = {"every": 0, "observables_every": 20}
     return Scenario.model_validate(base)
@@ -60,16 +64,18 @@ def main() -> None:
     ap.add_argument("--per-step-steps", type=int, default=400)
     ap.add_argument("--preset", default="xi-abed-sim1")
     ap.add_argument("--preset-steps", type=int, default=10_000)
+    ap.add_argument("--dim", type=int, choices=(2, 3), default=2, help="the single runs' dimension")
     args = ap.parse_args()
     from flocklab.kernels import runtime
     from flocklab.schemas import get_preset
 
     runtime.ensure("cpu")
     for fused in (True, False):  # compile both paths' kernels first
-        timed(scenario(8, 40), fused)
+        timed(scenario(8, 40, args.dim), fused)
     for n in args.sizes:
-        print(json.dumps(timed(scenario(n, args.fused_steps), True)), flush=True)
-        print(json.dumps(timed(scenario(n, args.per_step_steps), False)), flush=True)
+        for fused, steps in ((True, args.fused_steps), (False, args.per_step_steps)):
+            row = timed(scenario(n, steps, args.dim), fused)
+            print(json.dumps({"dim": args.dim, **row}), flush=True)
     if args.preset_steps:
         sc = get_preset(args.preset)
         sc = sc.model_copy(update={
