@@ -39,6 +39,41 @@ def host_array(a: np.ndarray, dtype: Any) -> np.ndarray:
     return out
 
 
+class Snapshots:
+    """A fused batch's snapshot buffer, for an observable the host computes (the flocking
+    path's lambda_2, 3D F2's D3): at each observation the kernel writes `width` values per
+    agent of each replica that takes them into its K rows (rows SNAP0 .. NOBS of the launch,
+    from `base[b]`), and the host reads them after the launch. A window is cut into launches
+    of at most `chunk` steps, so that K rows hold every observation of one, which never
+    changes a bit; chunk is None when no replica takes snapshots (one launch a window)."""
+
+    def __init__(self, ns: Sequence[int], rows: Sequence[int], on: Sequence[bool],
+                 everies: Sequence[int], width: int, doubles: int):
+        agents = sum(n for n, o in zip(ns, on, strict=True) if o)
+        self.K = max(3, min(max(rows), doubles // max(width * agents, 1)))
+        # a launch of chunk steps observes at most chunk / every + 2 rows (the last step)
+        taking = [e for e, o in zip(everies, on, strict=True) if o]
+        self.chunk = max(1, (self.K - 2) * min(taking)) if taking else None
+        sizes = [self.K * width * n if o else 0 for n, o in zip(ns, on, strict=True)]
+        self.base = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
+        self.ns, self.on, self.width = list(ns), list(on), width
+
+    def launches(self, s0: int, s1: int) -> list[tuple[int, int]]:
+        """The launches (a, b) of the window s0 .. s1."""
+        step = s1 - s0 if self.chunk is None else self.chunk
+        return [(a, min(a + step, s1)) for a in range(s0, s1, step)]
+
+    def taken(self, snap: np.ndarray, first: np.ndarray, last: np.ndarray):
+        """(b, r0, r1, values (r1 - r0, n, width)) for each replica that took rows r0 .. r1
+        in the last launch (first, last: each replica's SNAP0 and NOBS slots)."""
+        for b, on in enumerate(self.on):
+            r0, r1 = int(first[b]), int(last[b])
+            if on and r1 > r0:
+                n = self.ns[b]
+                vals = snap[self.base[b]:self.base[b] + (r1 - r0) * n * self.width]
+                yield b, r0, r1, vals.reshape(r1 - r0, n, self.width)
+
+
 class FusedBatch:
     """What every model's fused batch shares: its device arrays `args`, among them `iprm`,
     the per-replica integer slots whose slot 0 is the replica's last step; and host copies

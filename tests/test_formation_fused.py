@@ -318,7 +318,7 @@ def test_a_snapshot_buffer_smaller_than_a_window_does_not_change_a_bit(taichi_cp
     whole = kernels.run_batch(scenarios)
     monkeypatch.setattr(fused, "SNAP_DOUBLES", 1)
     small = FormationBatch(scenarios)
-    assert (small.K, small.chunk) == (3, 2)  # the smallest observables_every: 2
+    assert (small.snaps.K, small.snaps.chunk) == (3, 2)  # the smallest observables_every: 2
     assert small.snap == [False] * 3 + [True] * 3
     launches = []
     launch = FormationBatch._launch

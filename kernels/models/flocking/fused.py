@@ -51,7 +51,7 @@ import taichi as ti
 from flocklab.schemas import Scenario
 
 from ... import runtime
-from ...batch import FusedBatch
+from ...batch import FusedBatch, Snapshots
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
 from ...space.grid import max_cells_across, runaway_cause, widen
@@ -1058,15 +1058,10 @@ class FlockingBatch(FusedBatch):
                 n_obst += len(cen)
                 n_ocell += len(start)
         self.B, self.total, self.rows = B, total, rows
-        # lambda_2 snapshots of (r, R_i): K observation rows per replica per launch.
-        width = dim + 1
-        snap_agents = sum(width * n for n, s in zip(ns, self.snap, strict=True) if s)
-        self.K = max(3, min(max(rows), SNAP_DOUBLES // max(snap_agents, 1)))
-        sizes = [self.K * width * n if s else 0 for n, s in zip(ns, self.snap, strict=True)]
-        self.sbase = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
-        everies = [s.recording.observables_every
-                   for s, on in zip(scenarios, self.snap, strict=True) if on]
-        self.chunk = max(1, (self.K - 2) * min(everies)) if everies else None
+        # lambda_2 snapshots of (r, R_i).
+        self.snaps = Snapshots(ns, rows, self.snap,
+                               [s.recording.observables_every for s in scenarios], dim + 1,
+                               SNAP_DOUBLES)
         self.lam = [np.zeros(r) for r in rows]
 
         def arr(a: np.ndarray, dtype=float) -> ti.Ndarray:
@@ -1098,7 +1093,7 @@ class FlockingBatch(FusedBatch):
             ostart=arr(cat(ostart, 1, np.int32), i32),
             obs=arr(np.zeros((int(self.ooff[-1]), N_OBS))),
             val=arr(np.zeros(max(voff, 1), dtype=np.int32), i32),
-            snap=scratch(max(int(self.sbase[-1]), 1)), sbase=arr(self.sbase, i32),
+            snap=scratch(max(int(self.snaps.base[-1]), 1)), sbase=arr(self.snaps.base, i32),
         )
         self._order = list(self.args)
 
@@ -1106,27 +1101,18 @@ class FlockingBatch(FusedBatch):
         """Advance every replica from step s0 towards s1 (each stops at its own end), in
         launches of at most `chunk` steps while lambda_2 snapshots are taken."""
         self.invalidate()
-        step = s1 - s0 if self.chunk is None else self.chunk
-        for a in range(s0, s1, step):
-            self.kernel(a, min(a + step, s1), *(self.args[k] for k in self._order))
-            if self.chunk is not None:
+        for a, z in self.snaps.launches(s0, s1):
+            self.kernel(a, z, *(self.args[k] for k in self._order))
+            if self.snaps.chunk is not None:
                 self._lambda2()
 
     def _lambda2(self) -> None:
         """lambda_2 of the observations the last launch took (rows SNAP0 .. NOBS)."""
         iprm = self.status()
         snap = self.args["snap"].to_numpy()
-        obs = None
-        for b, on in enumerate(self.snap):
-            r0, r1 = int(iprm[b, IP.SNAP0]), int(iprm[b, IP.NOBS])
-            if not on or r1 == r0:
-                continue
-            if obs is None:
-                obs = self.args["obs"].to_numpy()
+        obs = self.args["obs"].to_numpy()
+        for b, r0, r1, s in self.snaps.taken(snap, iprm[:, IP.SNAP0], iprm[:, IP.NOBS]):
             sc = self.scenarios[b]
-            n, width = sc.n_agents, self.dim + 1
-            s = snap[self.sbase[b]:self.sbase[b] + (r1 - r0) * n * width]
-            s = s.reshape(r1 - r0, n, width)
             comps = obs[self.ooff[b] + r0:self.ooff[b] + r1, COL["components"]]
             own = self.mode == "mission"
             radii = s[:, :, self.dim] if own else sc.neighbours.radius

@@ -52,7 +52,7 @@ from flocklab.schemas.formation import (
 )
 
 from ... import runtime
-from ...batch import FusedBatch
+from ...batch import FusedBatch, Snapshots
 from ...space.cells import SPREAD
 from ...space.grid import runaway_cause, widen
 from ...space.initial import initial_state
@@ -299,20 +299,12 @@ class FormationBatch(FusedBatch):
         self.now = np.zeros(B, dtype=np.int64)  # each replica's current step
 
     def _snapshots(self, ns: list[int], rows: list[int]) -> np.ndarray:
-        """Size the snapshot buffer: K observation rows per snapshot replica per launch,
-        and launches of at most `chunk` steps (None: no snapshots, one launch a window).
-        Returns each replica's first slot in it (also self.sbase)."""
-        agents = sum(n for n, on in zip(ns, self.snap, strict=True) if on)
-        self.K = max(3, min(max(rows), SNAP_DOUBLES // max(SNAP_WIDTH * agents, 1)))
-        # a launch of chunk steps observes at most chunk / every + 2 rows (the last step)
-        everies = [sc.recording.observables_every
-                   for sc, on in zip(self.scenarios, self.snap, strict=True) if on]
-        self.chunk = max(1, (self.K - 2) * min(everies)) if everies else None
+        """The snapshot buffer of 3D F2's D3 (`Snapshots`); each replica's first slot."""
+        self.snaps = Snapshots(ns, rows, self.snap,
+                               [sc.recording.observables_every for sc in self.scenarios],
+                               SNAP_WIDTH, SNAP_DOUBLES)
         self.d3 = [np.zeros(r) for r in rows]
-        sizes = [self.K * SNAP_WIDTH * n if on else 0
-                 for n, on in zip(ns, self.snap, strict=True)]
-        self.sbase = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
-        return self.sbase
+        return self.snaps.base
 
     def _params(self, sc: Scenario, path: LeaderPath) -> np.ndarray:
         """Replica `sc`'s row of prm (a spline's timing is the host's: its S, Q, E unused)."""
@@ -364,11 +356,9 @@ class FormationBatch(FusedBatch):
         """Advance every replica from step s0 towards s1 (each stops at its own end), in
         launches of at most `chunk` steps while D3 snapshots are taken."""
         self.invalidate()
-        step = s1 - s0 if self.chunk is None else self.chunk
-        for c0 in range(s0, s1, step):
-            c1 = min(c0 + step, s1)
+        for c0, c1 in self.snaps.launches(s0, s1):
             self._launch(c0, c1)
-            if self.chunk is not None:
+            if self.snaps.chunk is not None:
                 self._d3()
         self.now = np.minimum(s1, self.steps)
 
@@ -385,18 +375,10 @@ class FormationBatch(FusedBatch):
         replica, from its snapshots with the per-step path's LP (props.d3_holds_3d); r_0 is
         the row's leader position, the kernel's p(t)."""
         iprm = self.status()
-        snap = obs = None
+        snap, obs = self.args["snap"].to_numpy(), self.args["obs"].to_numpy()
         lead = [OBS.index(c) for c in ("leader_x", "leader_y", "leader_z")]
-        for b, on in enumerate(self.snap):
-            r0, r1 = int(iprm[b, IP.SNAP0]), int(iprm[b, IP.NOBS])
-            if not on or r1 == r0:
-                continue
-            if snap is None:
-                snap, obs = self.args["snap"].to_numpy(), self.args["obs"].to_numpy()
+        for b, r0, r1, s in self.snaps.taken(snap, iprm[:, IP.SNAP0], iprm[:, IP.NOBS]):
             sc = self.scenarios[b]
-            n = sc.n_agents
-            s = snap[self.sbase[b]:self.sbase[b] + (r1 - r0) * n * SNAP_WIDTH]
-            s = s.reshape(r1 - r0, n, SNAP_WIDTH)
             p = obs[self.ooff[b] + r0:self.ooff[b] + r1][:, lead]
             tol = sc.model.leader_tolerance or sc.neighbours.radius / 100.0
             for r in range(r1 - r0):
