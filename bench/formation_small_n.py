@@ -3,6 +3,7 @@
     python -m bench.formation_small_n            # N = 5, 20, 100, 1000, then a preset
     python -m bench.formation_small_n --sizes 5 100 --preset-steps 0
     python -m bench.formation_small_n --dim 3 --preset-steps 0   # the same in 3D
+    python -m bench.formation_small_n --dim 3 --preset-steps 0 --observables V2 D1 D2
 
 Single runs: the xi-abed-sim3 scenario (F2, linear f, inverse g, d = 20, dt = 0.01,
 observables every 20 steps, no frames) with N agents on a box of side 50 sqrt(N / 100)
@@ -11,7 +12,8 @@ may take the fused path too), through `kernels.run`, compile excluded by a warm-
 The per-step path is forced with `kernels.engine.FUSED_MAX_N = 0`. Then a preset
 (xi-abed-sim1 by default) at 10^4 steps on both paths. `--dim 3`: the agents in a cube of
 side 50 (N / 100)^(1/3), the leader's target (-40, -40, -40); F2's D3 is then the host's
-linear program on the fused path too (kernels/models/formation/fused.py). Wall and CPU time
+linear program on the fused path too (kernels/models/formation/fused.py), unless
+`--observables` (the single runs' `recording.observables`) leaves it out. Wall and CPU time
 (`time.process_time`, all threads) with the load average beside them: the machine is
 shared.
 """
@@ -24,7 +26,7 @@ import os
 import time
 
 
-def scenario(n: int, steps: int, dim: int = 2):
+def scenario(n: int, steps: int, dim: int = 2, observables: list[str] | None = None):
     from flocklab.schemas import Scenario, get_preset
 
     base = get_preset("xi-abed-sim3").model_dump(mode="json")
@@ -35,7 +37,7 @@ def scenario(n: int, steps: int, dim: int = 2):
     base["initial"] = {"kind": "random", "N": n,
                        "region": {"kind": "box", "low": [0.0] * dim, "high": [side] * dim}}
     base["time"]["steps"] = steps
-    base["recording"] = {"every": 0, "observables_every": 20}
+    base["recording"] = {"every": 0, "observables_every": 20, "observables": observables}
     return Scenario.model_validate(base)
 
 
@@ -65,6 +67,8 @@ def main() -> None:
     ap.add_argument("--preset", default="xi-abed-sim1")
     ap.add_argument("--preset-steps", type=int, default=10_000)
     ap.add_argument("--dim", type=int, choices=(2, 3), default=2, help="the single runs' dimension")
+    ap.add_argument("--observables", nargs="+", default=None, metavar="NAME",
+                    help="the single runs' recording.observables (default: all)")
     args = ap.parse_args()
     from flocklab.kernels import runtime
     from flocklab.schemas import get_preset
@@ -74,8 +78,9 @@ def main() -> None:
         timed(scenario(8, 40, args.dim), fused)
     for n in args.sizes:
         for fused, steps in ((True, args.fused_steps), (False, args.per_step_steps)):
-            row = timed(scenario(n, steps, args.dim), fused)
-            print(json.dumps({"dim": args.dim, **row}), flush=True)
+            row = timed(scenario(n, steps, args.dim, args.observables), fused)
+            print(json.dumps({"dim": args.dim, "observables": args.observables, **row}),
+                  flush=True)
     if args.preset_steps:
         sc = get_preset(args.preset)
         sc = sc.model_copy(update={

@@ -253,7 +253,8 @@ class Recording(Strict):
         "`flocklab models`); null: all of them. Naming only cheap ones is faster: on the "
         "small-N path the Vicsek family skips the graph observables (components, "
         "degree_*, isolated) and the heading spread unless they are named. Supported by "
-        "the models that declare their observables (vicsek).",
+        "the models that declare their observables (vicsek, formation; formation in 3D "
+        "skips F2's D3, a linear program per component, unless it is named).",
     )
     precision: Literal["float64", "float32"] = Field(
         default="float64", description="Floating-point type of the recorded frames in the "
@@ -274,6 +275,10 @@ class Recording(Strict):
     def derived(self) -> list[str]:
         """The requested arrays computed from the state rather than held in it."""
         return [a for a in self.arrays if a in DERIVED_ARRAYS]
+
+    def wants(self, observable: str) -> bool:
+        """Whether the run reports `observable` (observables null: every one)."""
+        return self.observables is None or observable in self.observables
 
 
 Backend = Literal["cpu", "cuda", "vulkan", "auto"]

@@ -234,6 +234,15 @@ class FormationParams(ModelParams):
     )
     paper_inclusive: ClassVar[bool] = False
     state_arrays: ClassVar[tuple[str, ...]] = ("position", "velocity")
+    # Each design reports its own (docs/MODELS_M4.md): F1 formation_error .. V1, F2 V2 ..
+    # components; leader_z and centroid_z in 3D. D3 is the costly one in 3D (a linear
+    # program per component and observation): a scenario that does not name it skips it.
+    observables: ClassVar[tuple[str, ...] | None] = (
+        "leader_x", "leader_y", "leader_z", "leader_speed", "centroid_x", "centroid_y",
+        "centroid_z", "centroid_distance", "speed_min", "speed_mean", "speed_max",
+        "speed_error_max", "velocity_mismatch_max", "min_distance", "degree_mean",
+        "formation_error", "formation_error_max", "lag", "V1", "V2", "D1", "D2", "D3",
+        "isolated", "components")
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     dimensions_note: ClassVar[str] = (
         "3D: 3-vector paths and offsets, shapes cube and shell, rotations about an axis")

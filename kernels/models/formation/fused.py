@@ -253,7 +253,8 @@ class FormationBatch(FusedBatch):
             self.paths.append(path)
             f1 = p.design == "F1"
             self.f1.append(f1)
-            self.snap.append(dim == 3 and not f1)  # D3 the host's (props.d3_holds_3d)
+            # D3 in 3D: the host's (props.d3_holds_3d), from snapshots, when it is asked for.
+            self.snap.append(dim == 3 and not f1 and sc.recording.wants("D3"))
             a0 = int(self.aoff[b])
             pos[a0:a0 + n] = init.positions
             prm[b, :] = self._params(sc, path)
@@ -394,7 +395,8 @@ class FormationBatch(FusedBatch):
         rows = self.host("obs")[o0:o0 + iprm[b, IP.NOBS]]
         keep = COMMON + (COMMON_3D if self.dim == 3 else ()) + (
             F1_OBS if self.f1[b] else F2_OBS)
-        out = {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
+        wants = self.scenarios[b].recording.wants
+        out = {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep if wants(c)}}
         if self.snap[b]:
             out["D3"] = self.d3[b][:len(rows)].copy()
         return out

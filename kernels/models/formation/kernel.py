@@ -192,6 +192,7 @@ class FormationKernel(ModelKernel):
         self.dt = dt = scenario.time.dt
         self.f1 = p.design == "F1"
         self.dim = dim = scenario.dimension
+        self.wants_d3 = scenario.recording.wants("D3")  # F2's costliest observable
         init = initial_state(scenario)
         self.path = make_path(p.path, init.positions.mean(axis=0))
         if isinstance(p.attraction, SaturatingF):
@@ -473,13 +474,12 @@ class FormationKernel(ModelKernel):
         unite(self.state["pos"], self.parent, self.r2, *self.grid.view())
         flatten(self.parent)  # each slot's component label: its root
         n_isolated = isolated.count()
-        return {
-            "D1": float(min_dist >= collide),
-            "D2": float(n_isolated == 0),
-            "D3": float(self._d3(p, tol)),
-            "isolated": float(n_isolated),
-            "components": float(count_roots(self.parent)),
-        }
+        out = {"D1": float(min_dist >= collide), "D2": float(n_isolated == 0)}
+        if self.wants_d3:
+            out["D3"] = float(self._d3(p, tol))
+        out["isolated"] = float(n_isolated)
+        out["components"] = float(count_roots(self.parent))
+        return out
 
     def _d3(self, p: np.ndarray, tol: float) -> bool:
         """D3 from the agents off r^ (|r_i - r^| > tol), read in blocks: False at once when
