@@ -4,6 +4,7 @@
                                                 # and the 10^4-step presets, both paths
     python -m bench.small_n_flocking --sizes    # the per-N table only
     python -m bench.small_n_flocking --sizes --dim 3   # the same flocks in 3D
+    python -m bench.small_n_flocking --sizes --dim 3 --observables Q W components
     python -m bench.small_n_flocking --m3-3d    # tanner-obstacles made 3D at N = 100
 
 One JSON line per measurement: wall and CPU time (`time.process_time`) per step, and the
@@ -11,7 +12,8 @@ load average beside them (the machine is shared). Scenarios are preset-like: tjp
 (and tjp-fixed) with the initial box grown with N at the preset's density, observables
 every 10 steps, no frames, one thread; compile and kernel loading excluded by a warm-up run.
 `--dim 3`: the same presets in 3D, the initial box a cube holding the preset's agents per
-unit area as agents per unit volume.
+unit area as agents per unit volume. `--observables`: the per-N runs' recording.observables
+(default: all; lambda2, an eigensolve on the host at every observation, only if named).
 `--m3-3d`: tanner-obstacles in 3D (its wall of point obstacles at z = 0, the destination at
 the origin), N agents on a jittered cubic lattice of spacing 1.5 by the preset's start.
 """
@@ -30,12 +32,13 @@ from flocklab.schemas import PRESETS, Scenario
 SIZES = [5, 20, 100, 1000]
 
 
-def preset_like(name: str, n: int, steps: int, dim: int = 2) -> Scenario:
+def preset_like(name: str, n: int, steps: int, dim: int = 2,
+                observables: list[str] | None = None) -> Scenario:
     """The preset at N agents in `dim` dimensions, the initial box (the preset's square of
     side 5) scaled to keep its density."""
     spec = copy.deepcopy(PRESETS[name].build())  # build() shares its nested dicts
     spec["time"]["steps"] = steps
-    spec["recording"] = {"every": 0, "observables_every": 10}
+    spec["recording"] = {"every": 0, "observables_every": 10, "observables": observables}
     spec["threads"] = 1
     spec["space"]["dimension"] = dim
     init = spec["initial"]
@@ -91,6 +94,8 @@ def main() -> None:
     ap.add_argument("--dim", type=int, choices=(2, 3), default=2,
                     help="the flocks' dimension (the per-N table)")
     ap.add_argument("--m3-3d", action="store_true", help="3D tanner-obstacles at N = 100 only")
+    ap.add_argument("--observables", nargs="+", default=None, metavar="NAME",
+                    help="the per-N runs' recording.observables (default: all)")
     args = ap.parse_args()
     from flocklab.kernels import runtime
 
@@ -104,9 +109,9 @@ def main() -> None:
         for name in ("tjp-switching", "tjp-fixed"):
             for fused in (True, False):
                 steps = (3000 if n <= 100 else 1000) if fused else 300
-                row = timed(preset_like(name, n, steps, args.dim), fused)
-                print(json.dumps({"scenario": name, "dim": args.dim, "N": n, **row}),
-                      flush=True)
+                row = timed(preset_like(name, n, steps, args.dim, args.observables), fused)
+                print(json.dumps({"scenario": name, "dim": args.dim, "N": n,
+                                  "observables": args.observables, **row}), flush=True)
     if args.sizes:
         return
     for name in ("tjp-switching", "tjp-fixed", "tanner-obstacles"):

@@ -39,12 +39,23 @@ class ModelParams(Strict):
     # DERIVED_ARRAYS ("degree": |N_i| in its interaction graph, "radius": its own R_i).
     derived_arrays: ClassVar[tuple[str, ...]] = ()
     # The observables the model reports, when it declares them (then a scenario may
-    # choose among them with recording.observables); None: not declared.
+    # choose among them with recording.observables); None: not declared. A name ending in
+    # "_<i>" stands for one per agent: valency_<i> covers valency_0, valency_1, ...
     observables: ClassVar[tuple[str, ...] | None] = None
     # The values of space.dimension the model runs in; `dimensions_note` says which
     # variants are narrower (checked by `check_context`).
     dimensions: ClassVar[tuple[int, ...]] = (2,)
     dimensions_note: ClassVar[str] = ""
+
+    @classmethod
+    def reports(cls, name: str) -> bool:
+        """Whether `name` is among the declared observables (a per-agent "_<i>" name
+        matching its prefix and an agent index)."""
+        known = cls.observables or ()
+        if name in known:
+            return True
+        head, _, index = name.rpartition("_")
+        return index.isdigit() and index.isascii() and f"{head}_<i>" in known
 
     def check_context(self, ctx: ModelContext) -> None:
         """Cross-block checks (raise ValueError with a user-facing message)."""

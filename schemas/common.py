@@ -252,9 +252,10 @@ class Recording(Strict):
         description="The observables to evaluate, by the names the model reports (see "
         "`flocklab models`); null: all of them. Naming only cheap ones is faster: on the "
         "small-N path the Vicsek family skips the graph observables (components, "
-        "degree_*, isolated) and the heading spread unless they are named. Supported by "
-        "the models that declare their observables (vicsek, formation; formation in 3D "
-        "skips F2's D3, a linear program per component, unless it is named).",
+        "degree_*, isolated) and the heading spread unless they are named; flocking and "
+        "flocking_obstacles skip lambda2 (an eigensolve) and formation F2's D3 in 3D (a "
+        "linear program per component) unless named. Per-agent names: valency_<i> stands "
+        "for valency_0, valency_1, ...",
     )
     precision: Literal["float64", "float32"] = Field(
         default="float64", description="Floating-point type of the recorded frames in the "

@@ -183,6 +183,20 @@ class GraphSpec(Strict):
                 seen.add(key)
 
 
+HIST_BINS = 16  # valency_hist_0 .. valency_hist_15, then valency_hist_16plus
+# The observables of M2 and M3 (docs/MODELS_M2_M3.md); each run reports those of its
+# variant: W on a fixed graph, Q and Q_reduced on a switching one; valency_<i> (each
+# agent's) when N <= valency_per_agent_max, the histogram otherwise; the z components in
+# 3D. lambda2, an eigensolve on the host at every observation, is the costly one: a run
+# that does not name it skips it.
+FLOCK_OBSERVABLES = (
+    "speed_min", "speed_mean", "speed_max", "mean_velocity_x", "mean_velocity_y",
+    "mean_velocity_z", "velocity_disagreement", "velocity_disagreement_max",
+    "heading_spread", "Q", "Q_reduced", "components", "valency_mean", "valency_min",
+    "valency_max", "valency_<i>", *(f"valency_hist_{k}" for k in range(HIST_BINS)),
+    f"valency_hist_{HIST_BINS}plus", "min_distance", "min_pair_i", "min_pair_j", "lambda2")
+
+
 class DoubleIntegratorParams(ModelParams):
     """Parameters shared by the double-integrator flocking models (M2, M3)."""
 
@@ -272,6 +286,7 @@ class FlockingParams(DoubleIntegratorParams):
         "on a fixed graph or the proximity graph |r_ij| < R."
     )
     paper_inclusive: ClassVar[bool] = False
+    observables: ClassVar[tuple[str, ...] | None] = (*FLOCK_OBSERVABLES, "W")
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
 
     kind: Literal["flocking"] = "flocking"

@@ -22,7 +22,12 @@ from pydantic import Field, StrictBool
 
 from .base import NonNegativeReal, Point, PositiveInt, PositiveReal, Strict
 from .catalog import ModelContext, register_model
-from .flocking import DoubleIntegratorParams, PotentialSpec, check_radius_exceeds_d
+from .flocking import (
+    FLOCK_OBSERVABLES,
+    DoubleIntegratorParams,
+    PotentialSpec,
+    check_radius_exceeds_d,
+)
 
 MAX_OBSTACLES = 1_000_000
 Kappa = Annotated[float, Field(ge=1.0, le=100.0, allow_inf_nan=False), pydantic.Strict(True)]
@@ -54,6 +59,11 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
     )
     paper_inclusive: ClassVar[bool] = True
     derived_arrays: ClassVar[tuple[str, ...]] = ("degree", "radius")
+    observables: ClassVar[tuple[str, ...] | None] = (
+        *FLOCK_OBSERVABLES, "velocity_disagreement_components",
+        "velocity_disagreement_components_max", "radius_min", "radius_mean", "radius_max",
+        "mission_potential_max", "destination_distance_mean", "destination_distance_max",
+        "inside_vmin_fraction", "obstacle_distance_min")
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     dimensions_note: ClassVar[str] = "in 3D: point and sphere obstacles (discs with 3D centres)"
 

@@ -154,7 +154,7 @@ class Scenario(Strict):
                 raise ValueError(
                     f"recording.observables: model {self.model.kind} does not declare its "
                     "observables; leave it null (all are evaluated)")
-            unknown = sorted(set(chosen) - set(known))
+            unknown = sorted(n for n in set(chosen) if not type(self.model).reports(n))
             if unknown:
                 raise ValueError(
                     f"recording.observables: {', '.join(unknown)} not reported by model "

@@ -1017,7 +1017,8 @@ class FlockingBatch(FusedBatch):
                 int(sc.inclusive) if not fixed else 0, int(vper), voff]
             if not fixed:
                 voff += rows[b] * self.vwidth[b]
-            snap = not fixed and n <= p.lambda2_max_agents
+            # lambda_2 from snapshots, when N allows it and the scenario asks for it.
+            snap = not fixed and n <= p.lambda2_max_agents and sc.recording.wants("lambda2")
             self.snap.append(snap)
             iprm[b, IP.SNAP] = int(snap)
             if fixed:
@@ -1120,7 +1121,13 @@ class FlockingBatch(FusedBatch):
                                               comps, sc.model.lambda2_max_agents)
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
-        """The per-step path's series, in its order (kernel.py, obstacles.py)."""
+        """The per-step path's series, in its order (kernel.py, obstacles.py), of the
+        observables replica b's recording.observables names."""
+        wants = self.scenarios[b].recording.wants
+        return {k: v for k, v in self._series(b, iprm).items() if k == "step" or wants(k)}
+
+    def _series(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
+        """Every observable of replica b (observations taken so far)."""
         nobs = int(iprm[b, IP.NOBS])
         o0 = self.ooff[b]
         rows = self.host("obs")[o0:o0 + nobs]
@@ -1175,7 +1182,7 @@ class FlockingBatch(FusedBatch):
     def extra(self, b: int, iprm: np.ndarray) -> dict[str, Any]:
         """closest_approach (the first closest observation), the fixed graph, and M3's
         radius halvings and increases, as the per-step path reports them."""
-        obs = self.observables(b, iprm)
+        obs = self._series(b, iprm)
         closest: dict[str, Any] = {}
         if len(obs["step"]):
             t = int(np.argmin(obs["min_distance"]))

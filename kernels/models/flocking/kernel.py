@@ -87,6 +87,7 @@ class Flock(ModelKernel):
         self.p = p
         self.n = n = scenario.n_agents
         self.dim = scenario.dimension
+        self.wants_lambda2 = scenario.recording.wants("lambda2")  # an eigensolve each time
         self.dt = scenario.time.dt
         self.a, self.c = p.potential.coefficients()
         self.fixed = fixed
@@ -287,7 +288,7 @@ class Flock(ModelKernel):
             dist, a, b = fo.closest_pair(wide(st["pos"]))
             self._closest(step, dist, int(ids[a]), int(ids[b]), obs)
         lam = fo.NOT_COMPUTED
-        if self.n <= self.p.lambda2_max_agents:
+        if self.n <= self.p.lambda2_max_agents and self.wants_lambda2:
             radii = wide(st["rad"]) if self.per_agent_radius else self.grid_radius
             rule = "own" if self.flags["rule"] == OWN else "min"
             u, v = fo.proximity_edges(wide(st["pos"]), radii, rule, self.flags["inclusive"])

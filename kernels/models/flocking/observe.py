@@ -13,10 +13,11 @@ from scipy.sparse.csgraph import connected_components, laplacian
 from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 from scipy.spatial import cKDTree
 
+from flocklab.schemas.flocking import HIST_BINS
+
 from ...space.observables import circular_spread
 from ...space.stream import PairwiseSum, Rows, RowSum, blocks
 
-HIST_BINS = 16  # valency_hist_0 .. valency_hist_15, then valency_hist_16plus
 DENSE_EIG_MAX = 32  # dense eigvalsh up to this N; sparse shift-invert (faster) above
 NOT_COMPUTED = -1.0
 
