@@ -9,7 +9,7 @@ import socket
 import httpx
 import pytest
 
-from .svc_helpers import assert_problem, scenario
+from .svc_helpers import assert_problem, scenario, submit, wait_for
 
 
 def _job_count(http: httpx.Client) -> int:
@@ -136,3 +136,26 @@ def test_query_and_path_errors_are_problems(http):
     assert_problem(http.get("/v1/jobs", params={"cursor": "not-a-cursor"}), 422, "query.cursor")
     assert_problem(http.get("/no/such/route"), 404)
     assert_problem(http.delete("/v1/models"), 405)
+
+
+def test_observables_a_model_does_not_report_are_422_naming_them(http):
+    """recording.observables through the service: a flocking run naming M3's radius_min or
+    a formation run naming Vicsek's polarization is refused before anything is stored."""
+    before = _job_count(http)
+    for preset, bad, kind in (("tjp-switching", "radius_min", "flocking"),
+                              ("xi-abed-sim3", "polarization", "formation")):
+        body = assert_problem(http.post("/v1/jobs", json={
+            "preset": preset, "overrides": {"recording": {"observables": ["components", bad]}}}),
+            422)
+        assert f"{bad} not reported by model {kind}" in json.dumps(body)
+    assert _job_count(http) == before
+
+
+def test_a_run_reports_the_observables_it_names(http):
+    """A formation F2 job naming three observables (D3 left out) returns those alone."""
+    job = submit(http, {"preset": "xi-abed-sim3", "overrides": {
+        "time": {"steps": 40}, "recording": {"every": 0, "observables": ["V2", "D1", "D2"]}}})
+    assert wait_for(http, job["id"])["status"] == "succeeded"
+    obs = http.get(f"/v1/jobs/{job['id']}/metrics").json()["observables"]
+    assert set(obs) == {"step", "time", "V2", "D1", "D2"}
+    assert len(obs["V2"]) == len(obs["step"]) > 1
