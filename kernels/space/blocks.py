@@ -74,6 +74,24 @@ def dense_row_start(ry, rz, gi: ti.template()):
 
 
 @ti.func
+def dense_row(start: ti.template(), c, b, e, lo, hi, gi: ti.template(), dim: ti.template()):
+    """The agents k0 .. k1 - 1 (as a vector (k0, k1)) of the DenseGrid cells lo .. hi along
+    x at y = c[1] + b (3D: z = c[2] + e): contiguous, x being the fastest index; (0, 0) for
+    a row off the grid."""
+    k = ti.Vector([0, 0])
+    ry = c[1] + b
+    rz = 0
+    inside = (lo <= hi) & (ry >= 0) & (ry < gi[1])
+    if ti.static(dim == 3):
+        rz = c[2] + e
+        inside = inside & (rz >= 0) & (rz < gi[2])
+    if inside:
+        r0 = dense_row_start(ry, rz, gi)
+        k = ti.Vector([start[r0 + lo], start[r0 + hi + 1]])
+    return k
+
+
+@ti.func
 def n_cells(G: ti.template(), layout: ti.template(), dim: ti.template()):
     """The cells of the grid view G (a DenseGrid's arrays may hold more than it uses)."""
     gi = ti.static(G[3])
@@ -237,16 +255,10 @@ def make_sieved_visitor(sieve, pair, dim: int):
         lo = ti.max(c[0] - 1, 0)
         hi = ti.min(c[0] + 1, gi[0] - 1)
         for r in range(rows + 1):
-            k0, k1 = 0, 0
-            ry = c[1] + r % 3 - 1
-            rz = 0
-            inside = (r < rows) & (lo <= hi) & (ry >= 0) & (ry < gi[1])
-            if ti.static(dim == 3):
-                rz = c[2] + r // 3 - 1
-                inside = inside & (rz >= 0) & (rz < gi[2])
-            if inside:
-                r0 = dense_row_start(ry, rz, gi)
-                k0, k1 = start[r0 + lo], start[r0 + hi + 1]
+            rk = ti.Vector([0, 0])
+            if r < rows:
+                rk = dense_row(start, c, r % 3 - 1, r // 3 - 1, lo, hi, gi, dim)
+            k0, k1 = rk[0], rk[1]
             more = True
             while more:
                 k2 = ti.min(k1, k0 + SIEVE_CAP)

@@ -23,7 +23,7 @@ import taichi as ti
 from .. import runtime
 from ..result import SimulationDiverged
 from ..runtime import DevicePolicy
-from .blocks import dense_row_start
+from .blocks import dense_row, dense_row_start
 from .grid import Grid, bbox_buffer, bounding_box, max_cells_across, row, space_cell, widen
 
 nd = ti.types.ndarray()
@@ -126,10 +126,11 @@ class DenseGrid:
 
 def make_dense_visitor(pair, dim: int = 2):
     """grid.make_visitor's interface over a DenseGrid: three contiguous rows of three cells
-    (3D: nine rows, z layers outermost). The rows blocks.make_sieved_visitor reads for a cell's
-    agents together, written out again: the per-agent visit folded through that
-    in-place interface measured slower (M4 F1's step at 10^6, three alternating pairs of
-    processes: 113-118 ms against 99-116 ms)."""
+    (3D: nine rows, z layers outermost), each row's agents from blocks.dense_row, as
+    blocks.make_sieved_visitor reads them for a cell's agents together. The per-agent visit
+    keeps its own loop: folded through that visitor's in-place interface it measured slower
+    (M4 F1's step at 10^6, three alternating pairs of processes: 113-118 ms against 99-116
+    ms)."""
     layers = range(-1, 2) if dim == 3 else range(1)
 
     @ti.func
@@ -140,17 +141,10 @@ def make_dense_visitor(pair, dim: int = 2):
         lo = ti.max(c[0] - 1, 0)
         hi = ti.min(c[0] + 1, gi[0] - 1)
         for e in ti.static(layers):
-            rz = 0
-            inside = lo <= hi
-            if ti.static(dim == 3):
-                rz = c[2] + e
-                inside = inside & (rz >= 0) & (rz < gi[2])
             for b in range(3):
-                ry = c[1] + b - 1
-                if inside & (ry >= 0) & (ry < gi[1]):
-                    r0 = dense_row_start(ry, rz, gi)
-                    for k in range(start[r0 + lo], start[r0 + hi + 1]):
-                        acc = pair(i, k, row(pos, k, dim) - xi, acc, S)
+                rk = dense_row(start, c, b - 1, e, lo, hi, gi, dim)
+                for k in range(rk[0], rk[1]):
+                    acc = pair(i, k, row(pos, k, dim) - xi, acc, S)
         return acc
 
     return visit
