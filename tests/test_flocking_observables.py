@@ -11,35 +11,10 @@ from flocklab import kernels
 from flocklab.kernels.models.flocking import fused
 from flocklab.kernels.models.flocking import observe as fo
 from flocklab.schemas import Scenario
-from tests.test_flocking_fused import MIXES, Frames
+from tests.selection import counted, run, with_observables
+from tests.test_flocking_fused import MIXES
 
-
-def with_observables(sc: Scenario, names: list[str] | None) -> Scenario:
-    doc = sc.model_dump(mode="json")
-    doc["recording"]["observables"] = names
-    doc["recording"]["arrays"] = ["position", "velocity"]
-    doc["recording"]["every"] = 10
-    return Scenario.model_validate(doc)
-
-
-def counted(monkeypatch, module, name: str) -> list[int]:
-    """Count the calls of module.name (still calling it)."""
-    calls = [0]
-    real = getattr(module, name)
-
-    def spy(*args, **kwargs):
-        calls[0] += 1
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(module, name, spy)
-    return calls
-
-
-def run(sc: Scenario):
-    sink = Frames()
-    res = kernels.run(sc, sink=sink)
-    assert res.status == "completed", res.error
-    return res, sink
+FRAMES = {"arrays": ["position", "velocity"], "every": 10}
 
 
 @pytest.mark.parametrize("path", ["fused", "per_step"], indirect=True)
@@ -72,10 +47,10 @@ def test_without_lambda2_no_eigensolve_and_every_bit_kept(taichi_cpu, monkeypatc
     """lambda2 not named: no eigensolve; the run reports the named columns alone, equal to
     the full run's bit for bit, and the same frames. Named: it is solved again."""
     sc = CASES[case]
-    full, full_frames = run(with_observables(sc, None))
+    full, full_frames = run(with_observables(sc, None, **FRAMES))
     solve = (counted(monkeypatch, fused, "lambda2_rows") if path == "fused" else
              counted(monkeypatch, fo, "algebraic_connectivity"))
-    some, some_frames = run(with_observables(sc, CHOSEN[case]))
+    some, some_frames = run(with_observables(sc, CHOSEN[case], **FRAMES))
     assert solve[0] == 0
     assert some.extra["engine_path"] == path
     assert set(some.observables) == {"step", "time", *CHOSEN[case]}
@@ -85,7 +60,7 @@ def test_without_lambda2_no_eigensolve_and_every_bit_kept(taichi_cpu, monkeypatc
     for x, y in zip(some_frames.frames, full_frames.frames, strict=True):
         for k in x:
             assert np.array_equal(x[k], y[k]), k
-    again, _ = run(with_observables(sc, ["lambda2"]))
+    again, _ = run(with_observables(sc, ["lambda2"], **FRAMES))
     assert solve[0] > 0
     assert np.array_equal(again.observables["lambda2"], full.observables["lambda2"])
     assert full.observables["lambda2"].max() > 0.0  # computed, not the -1 of "not computed"

@@ -10,35 +10,10 @@ from flocklab import kernels
 from flocklab.kernels.models.formation import fused
 from flocklab.kernels.models.formation import kernel as per_step
 from flocklab.schemas import Scenario
-from tests.test_formation_fused import F2_3D, MIX, MIX_3D, Frames, scenario_in
+from tests.selection import counted, run, with_observables
+from tests.test_formation_fused import F2_3D, MIX, MIX_3D, scenario_in
 
 CHEAP = ["V2", "D1", "D2", "isolated", "components", "min_distance", "leader_x"]
-
-
-def with_observables(sc: Scenario, names: list[str] | None) -> Scenario:
-    doc = sc.model_dump(mode="json")
-    doc["recording"]["observables"] = names
-    return Scenario.model_validate(doc)
-
-
-def counted(monkeypatch, module, name: str) -> list[int]:
-    """Count the calls of module.name (still calling it)."""
-    calls = [0]
-    real = getattr(module, name)
-
-    def spy(*args, **kwargs):
-        calls[0] += 1
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(module, name, spy)
-    return calls
-
-
-def run(sc: Scenario):
-    sink = Frames()
-    res = kernels.run(sc, sink=sink)
-    assert res.status == "completed", res.error
-    return res, sink
 
 
 @pytest.mark.parametrize("path", ["fused", "per_step"], indirect=True)
