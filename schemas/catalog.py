@@ -55,7 +55,8 @@ class ModelParams(Strict):
         if name in known:
             return True
         head, _, index = name.rpartition("_")
-        return index.isdigit() and index.isascii() and f"{head}_<i>" in known
+        agent = index.isascii() and index.isdigit() and str(int(index)) == index
+        return agent and f"{head}_<i>" in known
 
     def check_context(self, ctx: ModelContext) -> None:
         """Cross-block checks (raise ValueError with a user-facing message)."""

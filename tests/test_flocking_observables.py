@@ -69,6 +69,7 @@ def test_without_lambda2_no_eigensolve_and_every_bit_kept(taichi_cpu, monkeypatc
 @pytest.mark.parametrize("kind, name", [
     ("flocking", "radius_min"),  # M3's
     ("flocking", "valency_x"),
+    ("flocking", "valency_07"),  # agent 7 is valency_7
     ("flocking", "valency_hist_17"),
     ("flocking", "polarization"),
     ("flocking_obstacles", "W"),  # M2's fixed graph
