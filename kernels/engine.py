@@ -114,9 +114,8 @@ def run(
     if status != "diverged" and on_progress is not None:
         on_progress(done, steps)
     wall = time.perf_counter() - t0
-    chosen = rec.observables
     obs = {k: np.asarray(v, dtype=np.float64) for k, v in series.items()
-           if chosen is None or k in ("step", "time") or k in chosen}
+           if k in ("step", "time") or rec.wants(k)}
     final = {k: float(v[-1]) for k, v in obs.items() if len(v)}
     tol = scenario.convergence.tolerance
     convergence = {k: time_to_converge(obs["time"], obs[k], tol)

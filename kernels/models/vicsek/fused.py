@@ -732,9 +732,7 @@ class VicsekBatch(FusedBatch):
             keep.remove("leader_error")
         if not self.track[b]:
             keep.remove("linked_intervals")
-        chosen = self.scenarios[b].recording.observables
-        if chosen is not None:
-            keep = [c for c in keep if c in chosen]
+        keep = [c for c in keep if self.scenarios[b].recording.wants(c)]
         return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
 
     def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
