@@ -96,6 +96,13 @@ def row(a: ti.template(), k, dim: ti.template()):
 
 
 @ti.func
+def put(a: ti.template(), i, x):
+    """Row i of the (N, dim) array a = the dim-vector x (row's inverse)."""
+    for c in ti.static(range(x.n)):
+        a[i, c] = x[c]
+
+
+@ti.func
 def set_row(a: ti.template(), k, v):
     """Store the vector v as row k of `a` (either layout of `row`)."""
     if ti.static(vector_rows(a)):

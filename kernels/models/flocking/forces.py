@@ -28,7 +28,7 @@ import taichi as ti
 
 from ...space.blocks import make_cell_pass, make_sieved_visitor, n_cells
 from ...space.graph import find, link
-from ...space.grid import make_visitor, row, within
+from ...space.grid import make_visitor, put, row, within
 from ...space.params import Slots
 from ...space.plane_grid import make_dense_visitor
 from . import potentials
@@ -63,13 +63,6 @@ def nonfinite(x, v):
     if ti.static(x.n == 3):
         s += x[2] + v[2]
     return ti.math.isnan(s) or ti.math.isinf(s)
-
-
-@ti.func
-def put(a: ti.template(), i, x):
-    """Row i of the (N, dim) array a = the dim-vector x."""
-    for c in ti.static(range(x.n)):
-        a[i, c] = x[c]
 
 
 def make_all_pairs_visitor(pair):

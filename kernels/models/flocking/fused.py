@@ -54,7 +54,7 @@ from ... import runtime
 from ...batch import FusedBatch, Snapshots
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
-from ...space.grid import max_cells_across, runaway_cause, widen
+from ...space.grid import max_cells_across, put, runaway_cause, widen
 from ...space.initial import unit_rows
 from ...space.params import Slots
 from . import observe as fo
@@ -127,13 +127,6 @@ def _full(x, dim: ti.template()):
 def _row(a: ti.template(), i, c0: ti.template(), dim: ti.template()):
     """Columns c0 .. c0 + dim of row i of a, as a dim-vector of the float type."""
     return ti.Vector([a[i, c0 + c] for c in ti.static(range(dim))], dt=float)
-
-
-@ti.func
-def _put(a: ti.template(), i, x):
-    """Row i of the (rows, dim) array a = the dim-vector x."""
-    for c in ti.static(range(x.n)):
-        a[i, c] = x[c]
 
 
 # build_cells' grid vector: cells across each way (nz = 1 in 2D; nx = 0: all pairs, -1: the
@@ -816,7 +809,7 @@ def advance_kernel(mode: int, dim: int = 2):
                         for k in range(a0, a0 + n):
                             nv = navigation(b, _row(ps, k, X, dim), prm, iprm, opos, orad,
                                             ostart)
-                            _put(mis, k, nv)
+                            put(mis, k, nv)
                     if graph:
                         row = ooff[b] + iprm[b, IP.NOBS]
                         obs[row, 0] = s
@@ -888,8 +881,8 @@ def advance_kernel(mode: int, dim: int = 2):
                                     u -= prm[b, P.CD] * vi
                             v = vi + dt * u
                             x = xi + dt * v
-                            _put(pos, i, x)
-                            _put(vel, i, v)
+                            put(pos, i, x)
+                            put(vel, i, v)
                             bad |= _nonfinite(x, v)
                         if bad != 0:
                             iprm[b, IP.BAD] = s

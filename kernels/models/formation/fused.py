@@ -54,6 +54,7 @@ from flocklab.schemas.formation import (
 from ... import runtime
 from ...batch import FusedBatch, Snapshots
 from ...space.cells import SPREAD
+from ...space.grid import row as row_of
 from ...space.grid import runaway_cause, widen
 from ...space.initial import initial_state
 from .forces import F_KINDS, G_KINDS
@@ -72,7 +73,6 @@ from .fused_terms import (
     P,
     is_nonfinite,
     leader_state,
-    position,
     rate,
     runaway,
 )
@@ -190,7 +190,7 @@ def advance_kernel(rk4: bool, dim: int):
                                     pos[i, c] = pos[i, c] + dt / 6.0 * (
                                         kk[i, c] + 2.0 * kk[i, dim + c]
                                         + 2.0 * kk[i, 2 * dim + c] + kk[i, 3 * dim + c])
-                                nonfinite |= ti.cast(is_nonfinite(position(pos, i, dim), dim),
+                                nonfinite |= ti.cast(is_nonfinite(row_of(pos, i, dim), dim),
                                                      ti.i32)
                         if coincident != 0 or nonfinite != 0:
                             iprm[b, IP.BAD] = s

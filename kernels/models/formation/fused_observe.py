@@ -9,6 +9,7 @@ import numpy as np
 import taichi as ti
 
 from ...space.graph import find_serial, union_serial
+from ...space.grid import row as row_of
 from .fused_terms import (
     IP,
     P,
@@ -18,7 +19,6 @@ from .fused_terms import (
     lag_length,
     leader_state,
     pair_energy,
-    position,
     target,
 )
 
@@ -82,12 +82,12 @@ def observe(b, a0, n, s, h, h0, row, prm: ti.template(), iprm: ti.template(),
     lead_k = -1  # the agent at r_0 (F2): the nearest to p, within the tolerance
     lead_d = ti.math.inf
     for i in range(a0, a0 + n):
-        xi = position(pos, i, dim)
+        xi = row_of(pos, i, dim)
         rep = ti.Vector.zero(float, dim)
         k = 0
         for j in range(a0, a0 + n):
             if j != i:
-                dv = position(pos, j, dim) - xi
+                dv = row_of(pos, j, dim) - xi
                 e2 = dv.dot(dv)
                 near = ti.min(near, e2)
                 if e2 < r2:

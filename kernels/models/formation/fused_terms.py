@@ -8,6 +8,7 @@ before 3D, term for term."""
 import taichi as ti
 
 from ...space.grid import max_cells_across
+from ...space.grid import row as row_of
 from ...space.params import Slots
 from .forces import F_KINDS, G_KINDS
 
@@ -206,20 +207,11 @@ def target(b, i, a0, n, p, ma, mb, ka, kb, iprm: ti.template(), forms: ti.templa
 
 
 @ti.func
-def position(src: ti.template(), i, dim: ti.template()):
-    """Row i of `src` as a dim-vector."""
-    v = ti.Vector.zero(float, dim)
-    for c in ti.static(range(dim)):
-        v[c] = src[i, c]
-    return v
-
-
-@ti.func
 def rate(b, i, a0, n, src: ti.template(), lp, ma, mb, ka, kb, prm: ti.template(),
           iprm: ti.template(), forms: ti.template(), dim: ti.template()):
     """(rdot_i, coincident neighbours) of agent i at the positions `src`: a
     (dim + 1)-vector."""
-    xi = position(src, i, dim)
+    xi = row_of(src, i, dim)
     r2 = prm[b, P.R2]
     gk = iprm[b, IP.GKIND]
     kg = prm[b, P.KG]
@@ -227,7 +219,7 @@ def rate(b, i, a0, n, src: ti.template(), lp, ma, mb, ka, kb, prm: ti.template()
     d2 = prm[b, P.D2]
     acc = ti.Vector.zero(float, dim + 1)
     for j in range(a0, a0 + n):
-        dv = position(src, j, dim) - xi
+        dv = row_of(src, j, dim) - xi
         e2 = dv.dot(dv)
         # r2 is the strict threshold: d^2 for "<", the next double above it for "<="
         if j != i and e2 < r2:
@@ -266,7 +258,7 @@ def runaway(b, a0, n, src: ti.template(), prm: ti.template(), iprm: ti.template(
     hi = ti.Vector([-ti.math.inf] * dim)
     bad = 0
     for i in range(a0, a0 + n):
-        x = position(src, i, dim)
+        x = row_of(src, i, dim)
         bad |= ti.cast(is_nonfinite(x, dim), ti.i32)
         lo = ti.min(lo, x)
         hi = ti.max(hi, x)
