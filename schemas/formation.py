@@ -286,6 +286,14 @@ class FormationParams(ModelParams):
         description="D2-D3: an agent within this distance of r_0 is 'at r_0' (default d/100).",
     )
 
+    def collision(self, d: float) -> float:
+        """D1's collision distance for neighbour radius d (default d/100)."""
+        return self.collision_distance or d / 100.0
+
+    def at_leader(self, d: float) -> float:
+        """D2-D3's tolerance for 'at r_0' for neighbour radius d (default d/100)."""
+        return self.leader_tolerance or d / 100.0
+
     def check_context(self, ctx: ModelContext) -> None:
         if ctx.space != "plane":
             raise ValueError("model formation runs on the unbounded plane: space.kind = 'plane'")

@@ -316,7 +316,7 @@ class FormationBatch(FusedBatch):
             R2=runtime.next_above(d * d) if sc.inclusive else d * d, D=d, D2=d * d,
             KG=p.repulsion.k_g, FA=f.c if isinstance(f, QuadraticF) else f.k,
             FB=f.v_max if isinstance(f, SaturatingF) else 0.0, DT=dt, TSTEP=dt / self.per,
-            COLLIDE=p.collision_distance or d / 100.0, TOL=p.leader_tolerance or d / 100.0,
+            COLLIDE=p.collision(d), TOL=p.at_leader(d),
             LAG_SIGN=-1.0 if p.lag_sign == "eq8" else 1.0, CELL=d * widen())
         if isinstance(path, StraightLine):
             row[P.T_ARR] = path.arrival_time
@@ -381,7 +381,7 @@ class FormationBatch(FusedBatch):
         for b, r0, r1, s in self.snaps.taken(snap, iprm[:, IP.SNAP0], iprm[:, IP.NOBS]):
             sc = self.scenarios[b]
             p = obs[self.ooff[b] + r0:self.ooff[b] + r1][:, lead]
-            tol = sc.model.leader_tolerance or sc.neighbours.radius / 100.0
+            tol = sc.model.at_leader(sc.neighbours.radius)
             for r in range(r1 - r0):
                 self.d3[b][r0 + r] = d3_holds_3d(s[r, :, :3] - p[r], s[r, :, 3].astype(int),
                                                  tol)

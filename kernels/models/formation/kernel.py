@@ -394,7 +394,7 @@ class FormationKernel(ModelKernel):
         low = {"speed": np.inf, "near": np.inf}
         high = {"speed": -np.inf, "speed_error": -np.inf, "mismatch": -np.inf,
                 "error": -np.inf}
-        isolated = Isolated(self.p.leader_tolerance or self.d / 100.0)
+        isolated = Isolated(self.p.at_leader(self.d))
 
         def extremes(key: str, x: np.ndarray, least: bool = False) -> None:
             if least:
@@ -466,7 +466,7 @@ class FormationKernel(ModelKernel):
                       ) -> dict[str, float]:
         """D1-D3 of an F2 formation around r_0 = p(t)."""
         tol = isolated.tol
-        collide = self.p.collision_distance or self.d / 100.0
+        collide = self.p.collision(self.d)
         if self.parent is None:
             self.parent = ti.ndarray(ti.i32, shape=self.n)
         reset_parent(self.parent)
