@@ -10,8 +10,9 @@ workload; bench/peer.py runs the peer beside it).
 Flocking (switching topology) and formation (F1, F2): the workloads of bench/bench.py
 (bench/workload_flocking.py, bench/workload_formation.py) and their 3D counterparts, the
 same with a third coordinate: the lattice of spacing 1 becomes a cubic one (about 30
-neighbours within R = 2 against 11 in 2D, jitter included; `flocking/switching-sparse`
-spaces it 1.3 apart, about 16 neighbours, its 2D twin unchanged), the formation's square of
+neighbours within R = 2 against 11 in 2D, jitter included; `flocking/switching-equal-cells`
+spaces it 2^(1/3) apart: 4 agents per R^3 as the square lattice has 4 per R^2, about 17
+neighbours, its 2D twin unchanged), the formation's square of
 one agent per d^2 a cube of one per d^3, its hexagonal formation a cubic lattice, its
 leader's target (x, 0, 0). The rate is the difference of a 5-step and a (5 + STEPS)-step
 run, which cancels set-up: meant for N >= 10^5, where the steps dominate. Each (model,
@@ -59,11 +60,12 @@ def flocking(n: int, dim: int, spacing_3d: float = 1.0) -> dict:
     return doc
 
 
-def flocking_like(n: int, dim: int) -> dict:
-    """The 3D flock nearer the 2D one's neighbourhood: a jittered cubic lattice of spacing
-    1.3 (and d = 1.3) has about 16 neighbours within R = 2 (spacing 1: about 30; the square
-    lattice: 11)."""
-    return flocking(n, dim, 1.3)
+def flocking_equal_cells(n: int, dim: int) -> dict:
+    """The 3D flock at the 2D one's density in agents per R^d, the convention of the Vicsek
+    comparison (density 4 per r^d in both dimensions): the square lattice of spacing 1 holds
+    4 agents per R^2 (R = 2), a cubic lattice of spacing 2^(1/3) (and d = 2^(1/3)) 4 per
+    R^3. About 17 neighbours within R (spacing 1: about 30; the square lattice: 11)."""
+    return flocking(n, dim, 2.0 ** (1.0 / 3.0))
 
 
 def formation(design: str):
@@ -83,7 +85,7 @@ def formation(design: str):
 
 MODELS = {"vicsek": [("vicsek", vicsek)],
           "flocking": [("flocking/switching", flocking),
-                       ("flocking/switching-sparse", flocking_like)],
+                       ("flocking/switching-equal-cells", flocking_equal_cells)],
           "formation": [("formation/F1", formation("F1")), ("formation/F2", formation("F2"))]}
 
 
