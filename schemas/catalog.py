@@ -48,6 +48,30 @@ class ModelParams(Strict):
     dimensions_note: ClassVar[str] = ""
 
     @classmethod
+    def observables_listing(cls) -> str:
+        """The declared observables for a message, a run of numbered names shortened:
+        valency_hist_0 .. valency_hist_15 (flocking declares 17 histogram bins)."""
+        out: list[str] = []
+        run: list[str] = []  # consecutive prefix_0, prefix_1, ... being collected
+
+        def close() -> None:
+            out.extend(run if len(run) < 3 else [f"{run[0]} .. {run[-1]}"])
+            run.clear()
+
+        for name in cls.observables or ():
+            head, _, index = name.rpartition("_")
+            if run and index == str(len(run)) and run[0].rpartition("_")[0] == head:
+                run.append(name)
+                continue
+            close()
+            if index == "0":
+                run.append(name)
+            else:
+                out.append(name)
+        close()
+        return ", ".join(out)
+
+    @classmethod
     def reports(cls, name: str) -> bool:
         """Whether `name` is among the declared observables (a per-agent "_<i>" name
         matching its prefix and an agent index)."""

@@ -158,7 +158,7 @@ class Scenario(Strict):
             if unknown:
                 raise ValueError(
                     f"recording.observables: {', '.join(unknown)} not reported by model "
-                    f"{self.model.kind}; it reports {', '.join(known)}")
+                    f"{self.model.kind}; it reports {type(self.model).observables_listing()}")
         dims = type(self.model).dimensions
         if self.dimension not in dims:
             raise ValueError(

@@ -11,6 +11,7 @@ from flocklab import kernels
 from flocklab.kernels.models.flocking import fused
 from flocklab.kernels.models.flocking import observe as fo
 from flocklab.schemas import Scenario
+from flocklab.schemas.flocking import HIST_BINS
 from tests.selection import counted, run, with_observables
 from tests.test_flocking_fused import MIXES
 
@@ -80,3 +81,14 @@ def test_a_name_the_model_does_not_report_is_refused(kind, name):
     doc["recording"]["observables"] = ["components", name]
     with pytest.raises(ValidationError, match=f"{name} not reported by model {kind}"):
         Scenario.model_validate(doc)
+
+
+def test_the_refusal_lists_the_histogram_as_one_run_of_names():
+    doc = CASES["switching"].model_dump(mode="json")
+    doc["recording"]["observables"] = ["Qx"]
+    with pytest.raises(ValidationError) as err:
+        Scenario.model_validate(doc)
+    message = str(err.value)
+    assert (f"valency_<i>, valency_hist_0 .. valency_hist_{HIST_BINS - 1}, "
+            f"valency_hist_{HIST_BINS}plus, min_distance") in message
+    assert "valency_hist_1," not in message and "lambda2, W" in message
