@@ -69,24 +69,29 @@ def dense_cell(bucket, gi: ti.template(), dim: ti.template()):
 
 @ti.func
 def dense_row_start(ry, rz, gi: ti.template()):
-    """The bucket of DenseGrid cell (0, ry, rz): rows of x-cells are contiguous."""
+    """The number of cell (0, ry, rz) in a row-major grid of gi cells (a DenseGrid's
+    bucket): rows of x-cells are contiguous."""
     return gi[0] * (ry + gi[1] * rz)
 
 
 @ti.func
-def dense_row(start: ti.template(), c, b, e, lo, hi, gi: ti.template(), dim: ti.template()):
-    """The agents k0 .. k1 - 1 (as a vector (k0, k1)) of the DenseGrid cells lo .. hi along
-    x at y = c[1] + b (3D: z = c[2] + e): contiguous, x being the fastest index; (0, 0) for
-    a row off the grid."""
+def grid_row(start: ti.template(), c0, c, b, e, lo, hi, shape: ti.template(),
+             dim: ti.template()):
+    """The agents k0 .. k1 - 1 (as a vector (k0, k1)) of the cells lo .. hi along x at
+    y = c[1] + b (3D: z = c[2] + e) of a row-major grid of `shape` cells (x fastest, then
+    y, then z) whose first cell is start's entry c0: contiguous, x being the fastest index;
+    (0, 0) for a row off the grid. The DenseGrid (c0 = 0) and the fused flocking batch's
+    per-replica agent and obstacle grids (c0: the replica's first cell) read their rows
+    here."""
     k = ti.Vector([0, 0])
     ry = c[1] + b
     rz = 0
-    inside = (lo <= hi) & (ry >= 0) & (ry < gi[1])
+    inside = (lo <= hi) & (ry >= 0) & (ry < shape[1])
     if ti.static(dim == 3):
         rz = c[2] + e
-        inside = inside & (rz >= 0) & (rz < gi[2])
+        inside = inside & (rz >= 0) & (rz < shape[2])
     if inside:
-        r0 = dense_row_start(ry, rz, gi)
+        r0 = c0 + dense_row_start(ry, rz, shape)
         k = ti.Vector([start[r0 + lo], start[r0 + hi + 1]])
     return k
 
@@ -257,7 +262,7 @@ def make_sieved_visitor(sieve, pair, dim: int):
         for r in range(rows + 1):
             rk = ti.Vector([0, 0])
             if r < rows:
-                rk = dense_row(start, c, r % 3 - 1, r // 3 - 1, lo, hi, gi, dim)
+                rk = grid_row(start, 0, c, r % 3 - 1, r // 3 - 1, lo, hi, gi, dim)
             k0, k1 = rk[0], rk[1]
             more = True
             while more:

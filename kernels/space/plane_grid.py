@@ -23,7 +23,7 @@ import taichi as ti
 from .. import runtime
 from ..result import SimulationDiverged
 from ..runtime import DevicePolicy
-from .blocks import dense_row, dense_row_start
+from .blocks import dense_row_start, grid_row
 from .grid import Grid, bbox_buffer, bounding_box, max_cells_across, row, space_cell, widen
 
 nd = ti.types.ndarray()
@@ -126,7 +126,7 @@ class DenseGrid:
 
 def make_dense_visitor(pair, dim: int = 2):
     """grid.make_visitor's interface over a DenseGrid: three contiguous rows of three cells
-    (3D: nine rows, z layers outermost), each row's agents from blocks.dense_row, as
+    (3D: nine rows, z layers outermost), each row's agents from blocks.grid_row, as
     blocks.make_sieved_visitor reads them for a cell's agents together. The per-agent visit
     keeps its own loop: folded through that visitor's in-place interface it measured slower
     (M4 F1's step at 10^6, three alternating pairs of processes: 113-118 ms against 99-116
@@ -142,7 +142,7 @@ def make_dense_visitor(pair, dim: int = 2):
         hi = ti.min(c[0] + 1, gi[0] - 1)
         for e in ti.static(layers):
             for b in range(3):
-                rk = dense_row(start, c, b - 1, e, lo, hi, gi, dim)
+                rk = grid_row(start, 0, c, b - 1, e, lo, hi, gi, dim)
                 for k in range(rk[0], rk[1]):
                     acc = pair(i, k, row(pos, k, dim) - xi, acc, S)
         return acc

@@ -52,6 +52,7 @@ from flocklab.schemas import Scenario
 
 from ... import runtime
 from ...batch import FusedBatch, Snapshots
+from ...space.blocks import grid_row
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
 from ...space.grid import max_cells_across, put, runaway_cause, widen
@@ -249,7 +250,7 @@ def make_visit(pair, dim: int, by_id: bool = False):
     ny < 0) the buckets of those cells, each slot checked against its exact cell (ps's
     hashed-cell columns). by_id: ps in id order (rows cidx[k]), and pair gets the rows."""
     X, _, _, HC, _ = columns(dim)
-    zr = 1 if dim == 3 else 0  # the planes around slot k's: -zr .. zr
+    rows = 3 ** (dim - 1)  # of the 3x3 (3x3x3) cells around slot k's
 
     @ti.func
     def at(k, cidx: ti.template()):
@@ -282,21 +283,15 @@ def make_visit(pair, dim: int, by_id: bool = False):
                         acc = pair(ik, j, _row(ps, j, X, dim) - xk, acc, q, ps, S)
         else:
             cc = cell[cidx[k]]
-            cx = cc % nx
-            cy = cc // nx % ny
-            cz = cc // (nx * ny)
-            xlo = ti.max(cx - 1, 0)
-            xhi = ti.min(cx + 1, nx - 1)
-            for dz in range(-zr, zr + 1):
-                plane = cz + dz
-                if plane >= 0 and plane < nz:
-                    for dy in range(-1, 2):
-                        row = cy + dy
-                        if row >= 0 and row < ny:
-                            base = c0 + (plane * ny + row) * nx
-                            for m in range(a0 + cstart[base + xlo], a0 + cstart[base + xhi + 1]):
-                                j = at(m, cidx)
-                                acc = pair(ik, j, _row(ps, j, X, dim) - xk, acc, q, ps, S)
+            c = ti.Vector([cc % nx, cc // nx % ny, cc // (nx * ny)])
+            xlo = ti.max(c[0] - 1, 0)
+            xhi = ti.min(c[0] + 1, nx - 1)
+            shape = ti.Vector([nx, ny, nz])
+            for r in range(rows):  # z outermost, then y
+                rk = grid_row(cstart, c0, c, r % 3 - 1, r // 3 - 1, xlo, xhi, shape, dim)
+                for m in range(a0 + rk[0], a0 + rk[1]):
+                    j = at(m, cidx)
+                    acc = pair(ik, j, _row(ps, j, X, dim) - xk, acc, q, ps, S)
         return acc
 
     return visit
@@ -317,29 +312,19 @@ def _fold_obstacles(b, x, acc, prm: ti.template(), iprm: ti.template(), opos: ti
     """acc folded over the obstacles of the 3x3 (3x3x3) cells around x in replica b's
     obstacle grid (cells numbered x fastest, then y, then z), rows contiguous along x."""
     dim = ti.static(x.n)
-    zr = ti.static(1 if dim == 3 else 0)  # the planes around x's: -zr .. zr
     w = prm[b, P.OW]
-    c0 = iprm[b, IP.OCOFF]
-    nx = iprm[b, IP.ONX]
-    ny = iprm[b, IP.ONY]
-    nz = iprm[b, IP.ONZ]
     c = ti.Vector([ti.cast(ti.floor((x[a] - prm[b, OORIGIN[a]]) / w), ti.i32)
                    for a in ti.static(range(dim))])
-    cz = 0
-    if ti.static(dim == 3):
-        cz = c[2]
+    shape = ti.Vector([iprm[b, IP.ONX], iprm[b, IP.ONY], iprm[b, IP.ONZ]])
     xlo = ti.max(c[0] - 1, 0)
-    xhi = ti.min(c[0] + 1, nx - 1)
+    xhi = ti.min(c[0] + 1, shape[0] - 1)
     rng = prm[b, P.RANGE]
     lam = prm[b, P.LAMBDA]
-    for dz in range(-zr, zr + 1):
-        plane = cz + dz
-        for dy in range(-1, 2):
-            row = c[1] + dy
-            if plane >= 0 and plane < nz and row >= 0 and row < ny and xlo <= xhi:
-                base = c0 + (plane * ny + row) * nx
-                for o in range(ostart[base + xlo], ostart[base + xhi + 1]):
-                    acc = fold_obstacle(acc, _row(opos, o, 0, dim) - x, orad[o], rng, lam)
+    for r in range(3 ** (dim - 1)):  # z outermost, then y
+        rk = grid_row(ostart, iprm[b, IP.OCOFF], c, r % 3 - 1, r // 3 - 1, xlo, xhi, shape,
+                      dim)
+        for o in range(rk[0], rk[1]):
+            acc = fold_obstacle(acc, _row(opos, o, 0, dim) - x, orad[o], rng, lam)
     return acc
 
 
