@@ -22,6 +22,8 @@ from .base import (
 )
 
 MAX_AGENTS = 50_000_000
+# Steps, and every "every k steps" count, at most this (the kernels take them as int32).
+MAX_STEPS = 10**9
 # 2: the plane and the square box (the papers' setting); 3: space and the cube.
 Dimension = Literal[2, 3]
 DIMENSION_DOC = "Spatial dimension: 2 (default) or 3."
@@ -215,7 +217,7 @@ Initial = Annotated[RandomInitial | ExplicitInitial, Field(discriminator="kind")
 class TimeSpec(Strict):
     """How long to run. Discrete-time models advance one step per dt."""
 
-    steps: PositiveInt = Field(description="Number of steps.", le=10**9)
+    steps: PositiveInt = Field(description="Number of steps.", le=MAX_STEPS)
     dt: PositiveReal = Field(
         default=1.0,
         description="Step length (time units). Discrete-time models (M1) use it as the "
@@ -231,7 +233,7 @@ class Recording(Strict):
     """What to record and how often. Frames go to the H5MD trajectory file."""
 
     every: NonNegativeInt = Field(
-        default=0, description="Record a frame every k steps (0: no frames; the last "
+        default=0, le=MAX_STEPS, description="Record a frame every k steps (0: no frames; the last "
         "frame is always recorded when k > 0)."
     )
     arrays: list[Literal["position", "velocity", "heading", "degree", "radius"]] = Field(
@@ -245,7 +247,8 @@ class Recording(Strict):
     )
     max_frames: PositiveInt = Field(default=10_000, description="Refuse runs with more frames.")
     observables_every: PositiveInt = Field(
-        default=1, description="Evaluate the observables every k steps (and at the end)."
+        default=1, le=MAX_STEPS,
+        description="Evaluate the observables every k steps (and at the end).",
     )
     observables: list[str] | None = Field(
         default=None, max_length=100,

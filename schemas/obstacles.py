@@ -22,6 +22,7 @@ from pydantic import Field, StrictBool
 
 from .base import NonNegativeReal, Point, PositiveInt, PositiveReal, Strict
 from .catalog import ModelContext, register_model
+from .common import MAX_STEPS
 from .flocking import (
     FLOCK_OBSERVABLES,
     DoubleIntegratorParams,
@@ -103,7 +104,7 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
         default=True, description="Apply eq. 4; false keeps R_i = R for every agent."
     )
     radius_every: PositiveInt = Field(
-        default=100,
+        default=100, le=MAX_STEPS,
         description="Evaluate eq. 4 at steps k > 0 with k % radius_every == 0 (before that "
         "step's motion), synchronously for all agents.",
     )

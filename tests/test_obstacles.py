@@ -118,6 +118,24 @@ def test_obstacle_preset_reaches_the_destination(path):
     json.dumps(result.summary(), allow_nan=False)
 
 
+def test_every_count_at_the_step_cap_runs(path):
+    """radius_every, observables_every and every may be as large as time.steps may
+    (10^9, an int32 in the kernels; one more is refused: tests/test_schemas.py): eq. 4
+    then never runs, the observables are taken at the start and the end, one frame at the
+    end."""
+    spec = PRESETS["tanner-obstacles"].build()
+    spec["time"]["steps"] = 20
+    spec["model"]["radius_every"] = 10**9
+    spec["recording"] = {**spec["recording"], "every": 10**9, "observables_every": 10**9}
+    result = kernels.run(Scenario.model_validate(spec))
+    assert result.status == "completed", result.error
+    assert result.extra["engine_path"] == path
+    dt = spec["time"]["dt"]
+    assert result.observables["time"].tolist() == [0.0, pytest.approx(20 * dt)]
+    R = spec["neighbours"]["radius"]
+    assert result.observables["radius_min"].tolist() == [R, R]  # eq. 4 never ran
+
+
 def test_stuck_pair_halves_then_recovers_its_radius(path):
     """A constructed stuck case for eq. 4. Agent 0 sits at the destination, agent 1 at rest
     where the mission pull balances the pair repulsion (2 s / (1 + s^2)^2 = 2/s^3 - 2/s,

@@ -28,7 +28,7 @@ def with_(path: str, value):
     *head, last = path.split(".")
     node = data
     for k in head:
-        node = node[k]
+        node = node.setdefault(k, {})
     node[last] = value
     return data
 
@@ -52,6 +52,10 @@ def test_good_scenario_round_trips_canonically():
     ("time.steps", 1.5, "time.steps", "valid integer"),
     ("initial.N", 0, "initial.N", "greater than 0"),
     ("initial.N", 10**9, "initial.N", "less than or equal"),
+    ("time.steps", 10**9 + 1, "time.steps", "less than or equal"),
+    ("recording.every", 10**9 + 1, "recording.every", "less than or equal"),
+    ("recording.observables_every", 2**31, "recording.observables_every",
+     "less than or equal"),
     ("space.L", 1e301, "space.L", "less than or equal"),
     ("model.rule", "laplacian", "model", "needs g > N"),
     ("model.colour", "red", "model.colour", "Extra inputs"),

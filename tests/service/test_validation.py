@@ -31,9 +31,12 @@ def _post_raw(http: httpx.Client, raw: str | bytes) -> httpx.Response:
         (lambda s: s["model"].update(eta="high"), "scenario.model.eta"),
         (lambda s: s.update(colour="red"), "scenario.colour"),
         (lambda s: s["initial"].update(N=0), "scenario.initial.N"),
+        # Past int32, where a kernel argument would overflow: refused, not a failed job.
+        (lambda s: s.update(recording={"observables_every": 2**31}),
+         "scenario.recording.observables_every"),
     ],
     ids=["unknown-model", "bool-for-int", "string-for-int", "negative-dt", "zero-dt",
-         "string-for-float", "extra-field", "zero-agents"],
+         "string-for-float", "extra-field", "zero-agents", "observables-every-past-int32"],
 )
 def test_invalid_scenario_is_422_naming_the_field(http, mutate, loc):
     before = _job_count(http)
