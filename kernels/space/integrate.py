@@ -9,10 +9,10 @@ stage (c = h/2, h/2, h); after the fourth evaluation `rk4_finish` writes y1. The
 in the order above, so y1 has the same bits as the formula written out.
 
 The double integrator dr/dt = v, dv/dt = u(r, v) of M2/M3 (paper 000 eq. 1) is the pair
-y = (r, v), f = (v, u): its position stage takes the stage velocity as k and must run
-before the velocity stage moves it (`rk4_stage(r0, rs, vs, ...)`, then
-`rk4_stage(v0, vs, u, ...)`). M4's single integrator r' = u(r) is one array. Semi-implicit
-Euler, the default, is fused into the force kernels of each family.
+y = (r, v), f = (v, u), moved by the `_pair` kernels (one launch for both arrays: a small
+run's step is mostly launches): its position stage takes the stage velocity as k and reads
+it before the velocity stage moves it. M4's single integrator r' = u(r) is one array.
+Semi-implicit Euler, the default, is fused into the force kernels of each family.
 """
 
 import taichi as ti
@@ -20,13 +20,31 @@ import taichi as ti
 nd = ti.types.ndarray()
 
 
+@ti.func
+def _begin(y0: ti.template(), ys: ti.template(), yk: ti.template(), i, m):
+    ys[i, m] = y0[i, m]
+    yk[i, m] = 0.0
+
+
+@ti.func
+def _stage(y0: ti.template(), ys: ti.template(), k: ti.template(), yk: ti.template(), w, c,
+           i, m):
+    yk[i, m] += w * k[i, m]
+    ys[i, m] = y0[i, m] + c * k[i, m]
+
+
+@ti.func
+def _finish(y0: ti.template(), k: ti.template(), yk: ti.template(), h6, y_out: ti.template(),
+            i, m):
+    y_out[i, m] = y0[i, m] + h6 * (yk[i, m] + k[i, m])
+
+
 @ti.kernel
 def rk4_begin(y0: nd, ys: nd, yk: nd):
     """Stage state y0, sum zero."""
     for i in range(y0.shape[0]):
-        for c in range(y0.shape[1]):
-            ys[i, c] = y0[i, c]
-            yk[i, c] = 0.0
+        for m in range(y0.shape[1]):
+            _begin(y0, ys, yk, i, m)
 
 
 @ti.kernel
@@ -34,8 +52,7 @@ def rk4_stage(y0: nd, ys: nd, k: nd, yk: nd, w: float, c: float):
     """yk += w k; ys <- y0 + c k."""
     for i in range(y0.shape[0]):
         for m in range(y0.shape[1]):
-            yk[i, m] += w * k[i, m]
-            ys[i, m] = y0[i, m] + c * k[i, m]
+            _stage(y0, ys, k, yk, w, c, i, m)
 
 
 @ti.kernel
@@ -43,7 +60,41 @@ def rk4_finish(y0: nd, k: nd, yk: nd, h6: float, y_out: nd):
     """y1 = y0 + h/6 (k1 + 2 k2 + 2 k3 + k4), with k4 = k."""
     for i in range(y0.shape[0]):
         for m in range(y0.shape[1]):
-            y_out[i, m] = y0[i, m] + h6 * (yk[i, m] + k[i, m])
+            _finish(y0, k, yk, h6, y_out, i, m)
+
+
+@ti.kernel
+def rk4_begin_pair(r0: nd, rs: nd, rk: nd, v0: nd, vs: nd, vk: nd):
+    """rk4_begin for r and for v."""
+    for i in range(r0.shape[0]):
+        for m in range(r0.shape[1]):
+            _begin(r0, rs, rk, i, m)
+            _begin(v0, vs, vk, i, m)
+
+
+@ti.kernel
+def rk4_stage_pair(r0: nd, rs: nd, rk: nd, v0: nd, vs: nd, vk: nd, u: nd, w: float,
+                   c: float):
+    """rk4_stage for (r, v)' = (v, u): r's with k = vs, read before v's (k = u) moves vs."""
+    for i in range(r0.shape[0]):
+        for m in range(r0.shape[1]):
+            _stage(r0, rs, vs, rk, w, c, i, m)
+            _stage(v0, vs, u, vk, w, c, i, m)
+
+
+@ti.kernel
+def rk4_finish_pair(r0: nd, rk: nd, v0: nd, vs: nd, vk: nd, u: nd, h6: float, r_out: nd,
+                    v_out: nd, bad: nd):
+    """rk4_finish for r (k4 = vs) and for v (k4 = u); bad[0] += the rows where either
+    holds a NaN or an infinity."""
+    for i in range(r0.shape[0]):
+        s = 0.0
+        for m in range(r0.shape[1]):
+            _finish(r0, vs, rk, h6, r_out, i, m)
+            _finish(v0, u, vk, h6, v_out, i, m)
+            s += r_out[i, m] + v_out[i, m]  # NaN if any term is NaN or infinite
+        if ti.math.isnan(s) or ti.math.isinf(s):
+            ti.atomic_add(bad[0], 1)
 
 
 @ti.kernel
@@ -53,17 +104,6 @@ def count_nonfinite(a: nd, bad: nd):
         s = 0.0
         for m in range(a.shape[1]):
             s += a[i, m]  # NaN if any term is NaN or infinite
-        if ti.math.isnan(s) or ti.math.isinf(s):
-            ti.atomic_add(bad[0], 1)
-
-
-@ti.kernel
-def count_nonfinite_pairs(a: nd, b: nd, bad: nd):
-    """bad[0] += the rows i where a[i] or b[i] holds a NaN or an infinity."""
-    for i in range(a.shape[0]):
-        s = 0.0
-        for m in range(a.shape[1]):
-            s += a[i, m] + b[i, m]
         if ti.math.isnan(s) or ti.math.isinf(s):
             ti.atomic_add(bad[0], 1)
 

@@ -44,6 +44,15 @@ def _permute(perm: nd, a: nd, a_out: nd, b: nd, b_out: nd, c: nd, c_out: nd, d: 
             _move(d, d_out, i, j)
 
 
+def permute_all(perm: ti.Ndarray, pairs: list[tuple[ti.Ndarray, ti.Ndarray]]) -> None:
+    """dst's slot perm[i] = src's slot i for every (src, dst) pair: up to four arrays a
+    launch."""
+    for g in range(0, len(pairs), _PER_LAUNCH):
+        group = pairs[g:g + _PER_LAUNCH]
+        padded = group + [pairs[0]] * (_PER_LAUNCH - len(group))  # unused: untouched
+        _permute(perm, *[x for pair in padded for x in pair], len(group))
+
+
 class SortedState:
     """Named (N,) or (N, C) arrays of the runtime's float type plus `ids`, permuted
     together. The (N, C) arrays named in `vectors` are held as (N,) arrays of C-vectors
@@ -87,12 +96,8 @@ class SortedState:
     def resort(self, grid: Grid) -> None:
         """Move every array into the order of `grid.perm` (computed from `cur` positions):
         one launch for the ids and up to three arrays."""
-        pairs = [(self.ids, self._ids_buf)] + [(a, self._buf[name])
-                                               for name, a in self.cur.items()]
-        for g in range(0, len(pairs), _PER_LAUNCH):
-            group = pairs[g:g + _PER_LAUNCH]
-            padded = group + [pairs[0]] * (_PER_LAUNCH - len(group))  # unused: untouched
-            _permute(grid.perm, *[x for pair in padded for x in pair], len(group))
+        permute_all(grid.perm, [(self.ids, self._ids_buf)]
+                    + [(a, self._buf[name]) for name, a in self.cur.items()])
         self.ids, self._ids_buf = self._ids_buf, self.ids
         for name in self.cur:
             self.cur[name], self._buf[name] = self._buf[name], self.cur[name]

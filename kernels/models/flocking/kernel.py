@@ -31,17 +31,10 @@ from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
 from ...space.graph import count_roots, flatten, reset_parent
-from ...space.grid import permute, permute_rows
 from ...space.initial import initial_state, unit_rows
-from ...space.integrate import (
-    count_nonfinite_pairs,
-    gather_rows,
-    rk4_begin,
-    rk4_finish,
-    rk4_stage,
-)
+from ...space.integrate import gather_rows, rk4_begin_pair, rk4_finish_pair, rk4_stage_pair
 from ...space.plane_grid import PlaneGrid
-from ...space.state import SortedState
+from ...space.state import SortedState, permute_all
 from ...space.stream import ArgMin, PairwiseSum, Rows, blocks
 from . import observe as fo
 from .forces import (
@@ -199,17 +192,13 @@ class Flock(ModelKernel):
     def _rk4_step(self, step: int, pos_out: ti.Ndarray, vel_out: ti.Ndarray) -> None:
         b, h = self.rk4, self.dt
         x0, v0 = self.state["pos"], self.state["vel"]
-        rk4_begin(x0, b["xs"], b["xk"])
-        rk4_begin(v0, b["vs"], b["vk"])
+        rk4_begin_pair(x0, b["xs"], b["xk"], v0, b["vs"], b["vk"])
         self._accel(x0, v0, b["a"], step, at_state=True)
         for w, c in ((1.0, h / 2), (2.0, h / 2), (2.0, h)):
-            # (r, v)' = (v, u): the position stage reads vs before the velocity stage moves it.
-            rk4_stage(x0, b["xs"], b["vs"], b["xk"], w, c)
-            rk4_stage(v0, b["vs"], b["a"], b["vk"], w, c)
+            rk4_stage_pair(x0, b["xs"], b["xk"], v0, b["vs"], b["vk"], b["a"], w, c)
             self._accel(b["xs"], b["vs"], b["a"], step, at_state=False)
-        rk4_finish(x0, b["vs"], b["xk"], h / 6, pos_out)
-        rk4_finish(v0, b["a"], b["vk"], h / 6, vel_out)
-        count_nonfinite_pairs(pos_out, vel_out, self.bad)
+        rk4_finish_pair(x0, b["xk"], v0, b["vs"], b["vk"], b["a"], h / 6, pos_out, vel_out,
+                        self.bad)
 
     def _accel(self, pos: ti.Ndarray, vel: ti.Ndarray, out: ti.Ndarray, step: int,
                at_state: bool) -> None:
@@ -232,10 +221,10 @@ class Flock(ModelKernel):
         s = {"pos": st.scratch("pos"), "vel": st.scratch("vel"), "a": self.stage,
              "rad": st.scratch("rad") if self.per_agent_radius else self._no_rad}
         g.build(pos, step)
-        permute_rows(pos, s["pos"], g.perm)
-        permute_rows(vel, s["vel"], g.perm)
+        moved = [(pos, s["pos"]), (vel, s["vel"])]
         if self.per_agent_radius:
-            permute(self.state["rad"], s["rad"], g.perm)
+            moved.append((self.state["rad"], s["rad"]))
+        permute_all(g.perm, moved)
         _, accel = self._kernels(g)
         accel(s["pos"], s["vel"], s["rad"], s["a"], self.prm, self.mission.nav, self.bad,
               *g.view(), *self.mission.obstacles.view())
