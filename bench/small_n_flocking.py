@@ -6,6 +6,7 @@
     python -m bench.small_n_flocking --sizes --dim 3   # the same flocks in 3D
     python -m bench.small_n_flocking --sizes --dim 3 --observables Q W components
     python -m bench.small_n_flocking --m3-3d    # tanner-obstacles made 3D at N = 100
+    python -m bench.small_n_flocking --sizes --integrator rk4   # the per-step path alone
 
 One JSON line per measurement: wall and CPU time (`time.process_time`) per step, and the
 load average beside them (the machine is shared). Scenarios are preset-like: tjp-switching
@@ -14,6 +15,7 @@ every 10 steps, no frames, one thread; compile and kernel loading excluded by a 
 `--dim 3`: the same presets in 3D, the initial box a cube holding the preset's agents per
 unit area as agents per unit volume. `--observables`: the per-N runs' recording.observables
 (default: all; lambda2, an eigensolve on the host at every observation, only if named).
+`--integrator rk4`: the per-N runs with RK4, which only the per-step path runs.
 `--m3-3d`: tanner-obstacles in 3D (its wall of point obstacles at z = 0, the destination at
 the origin), N agents on a jittered cubic lattice of spacing 1.5 by the preset's start.
 """
@@ -33,11 +35,13 @@ SIZES = [5, 20, 100, 1000]
 
 
 def preset_like(name: str, n: int, steps: int, dim: int = 2,
-                observables: list[str] | None = None) -> Scenario:
+                observables: list[str] | None = None,
+                integrator: str = "semi_implicit_euler") -> Scenario:
     """The preset at N agents in `dim` dimensions, the initial box (the preset's square of
     side 5) scaled to keep its density."""
     spec = copy.deepcopy(PRESETS[name].build())  # build() shares its nested dicts
     spec["time"]["steps"] = steps
+    spec["model"]["integrator"] = integrator
     spec["recording"] = {"every": 0, "observables_every": 10, "observables": observables}
     spec["threads"] = 1
     spec["space"]["dimension"] = dim
@@ -96,6 +100,8 @@ def main() -> None:
     ap.add_argument("--m3-3d", action="store_true", help="3D tanner-obstacles at N = 100 only")
     ap.add_argument("--observables", nargs="+", default=None, metavar="NAME",
                     help="the per-N runs' recording.observables (default: all)")
+    ap.add_argument("--integrator", choices=("semi_implicit_euler", "rk4"),
+                    default="semi_implicit_euler", help="the per-N runs' integrator")
     args = ap.parse_args()
     from flocklab.kernels import runtime
 
@@ -105,13 +111,16 @@ def main() -> None:
             row = timed(tanner_3d(100, 3000 if fused else 300), fused)
             print(json.dumps({"scenario": "tanner-obstacles-3d", "N": 100, **row}), flush=True)
         return
+    paths = (True, False) if args.integrator == "semi_implicit_euler" else (False,)
     for n in SIZES:
         for name in ("tjp-switching", "tjp-fixed"):
-            for fused in (True, False):
+            for fused in paths:
                 steps = (3000 if n <= 100 else 1000) if fused else 300
-                row = timed(preset_like(name, n, steps, args.dim, args.observables), fused)
+                sc = preset_like(name, n, steps, args.dim, args.observables, args.integrator)
                 print(json.dumps({"scenario": name, "dim": args.dim, "N": n,
-                                  "observables": args.observables, **row}), flush=True)
+                                  "integrator": args.integrator,
+                                  "observables": args.observables, **timed(sc, fused)}),
+                      flush=True)
     if args.sizes:
         return
     for name in ("tjp-switching", "tjp-fixed", "tanner-obstacles"):
