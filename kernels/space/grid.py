@@ -403,11 +403,13 @@ class Grid:
             ti.i32, shape=-(-n_buckets // _SCAN_BLOCK))
         self._bb_part = None if self.periodic else bbox_buffer(n, dim)
 
-    def build(self, pos: ti.Ndarray, step: int = 0) -> None:
-        """Bucket the agents at `pos` ((N, dim), current storage order), compute `perm`."""
+    def build(self, pos: ti.Ndarray, step: int = 0, bb: np.ndarray | None = None) -> None:
+        """Bucket the agents at `pos` ((N, dim), current storage order), compute `perm`.
+        bb: their bounding box (`bounding_box`), when the caller has it already."""
         if not self.periodic:
             d = self.dim
-            bb = bounding_box(pos, self._bb_part)
+            if bb is None:
+                bb = bounding_box(pos, self._bb_part)
             extent = max(bb[d + c] - bb[c] for c in range(d))
             if not np.isfinite(extent):
                 raise SimulationDiverged(step, "position", "a position became non-finite")

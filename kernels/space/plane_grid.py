@@ -86,12 +86,13 @@ class DenseGrid:
         self.gf = ti.ndarray(float, shape=1 + dim)
         self.gi = ti.ndarray(ti.i32, shape=dim)
         self._bb_part = bbox_buffer(n, dim)
+        self.bbox: np.ndarray | None = None  # of the last build, kept or not
 
     def build(self, pos: ti.Ndarray, step: int) -> bool:
         """Bucket the agents at `pos`; False (nothing built) if the box needs more than
         CELLS_PER_AGENT cells per agent."""
         d = self.dim
-        bb = bounding_box(pos, self._bb_part)
+        self.bbox = bb = bounding_box(pos, self._bb_part)
         extent = max(bb[d + a] - bb[a] for a in range(d))
         if not math.isfinite(extent):
             raise SimulationDiverged(step, "position", "a position became non-finite")
@@ -162,11 +163,14 @@ class PlaneGrid:
         self.layout = "hash"
 
     def build(self, pos: ti.Ndarray, step: int) -> None:
-        if self.dense is not None and self.dense.build(pos, step):
-            self.layout = "dense"
-        else:
-            self.layout = "hash"
-            self._current().build(pos, step)
+        bb = None
+        if self.dense is not None:
+            if self.dense.build(pos, step):
+                self.layout = "dense"
+                return
+            bb = self.dense.bbox  # the hashed grid needs the same box: no second reduction
+        self.layout = "hash"
+        self._current().build(pos, step, bb)
 
     def _current(self) -> DenseGrid | Grid:
         if self.layout == "dense":
