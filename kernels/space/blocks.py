@@ -56,7 +56,8 @@ def box_cell(bucket, nc, dim: ti.template()):
 
 @ti.func
 def dense_cell(bucket, gi: ti.template(), dim: ti.template()):
-    """The DenseGrid cell whose bucket is `bucket` (x fastest, then y, then z)."""
+    """The cell numbered `bucket` in a row-major grid of gi cells (x fastest, then y, then
+    z): a DenseGrid's bucket, or a fused flocking replica's cell."""
     c = ti.Vector.zero(ti.i32, dim)
     c[0] = bucket % gi[0]
     if ti.static(dim == 2):

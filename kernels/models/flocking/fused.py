@@ -52,7 +52,7 @@ from flocklab.schemas import Scenario
 
 from ... import runtime
 from ...batch import FusedBatch, Snapshots
-from ...space.blocks import grid_row
+from ...space.blocks import dense_cell, grid_row
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
 from ...space.grid import max_cells_across, put, runaway_cause, widen
@@ -282,11 +282,10 @@ def make_visit(pair, dim: int, by_id: bool = False):
                     if same:
                         acc = pair(ik, j, _row(ps, j, X, dim) - xk, acc, q, ps, S)
         else:
-            cc = cell[cidx[k]]
-            c = ti.Vector([cc % nx, cc // nx % ny, cc // (nx * ny)])
+            shape = ti.Vector([nx, ny, nz])
+            c = dense_cell(cell[cidx[k]], shape, dim)
             xlo = ti.max(c[0] - 1, 0)
             xhi = ti.min(c[0] + 1, nx - 1)
-            shape = ti.Vector([nx, ny, nz])
             for r in range(rows):  # z outermost, then y
                 rk = grid_row(cstart, c0, c, r % 3 - 1, r // 3 - 1, xlo, xhi, shape, dim)
                 for m in range(a0 + rk[0], a0 + rk[1]):
