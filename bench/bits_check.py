@@ -2,8 +2,8 @@
 
 Runs every scenario in `examples/*.json` (sweeps are skipped) and every registered preset,
 plus an RK4 twin of each that integrates with Euler (none of them uses RK4 itself), on
-each engine path that applies to it (the per-step path always; the fused small-N path where
-`kernels.engine.fused_batch` picks it), and writes one JSON object
+each schedule that applies to it (per-step always; fused where "auto" takes it; batched
+wherever it covers the scenario: `kernels.run(..., path=...)`), and writes one JSON object
 per case: sha256 of the final per-agent arrays (position, velocity, heading: those the
 model has) and of every observable series. Runs are cut to `--steps` steps (default 1000),
 and those of more than `--large-n` agents to `--large-steps` (default 150), which keeps the
@@ -84,18 +84,11 @@ def scenarios(max_steps: int, large_n: int, large_steps: int
 def run_case(doc: dict[str, Any], path: str) -> dict[str, Any]:
     """Run one scenario on `path` ("per_step" or "fused") and hash what it produced."""
     from flocklab import kernels
-    from flocklab.kernels import engine
     from flocklab.schemas import Scenario
 
     scenario = Scenario.model_validate(doc)
     sink = LastFrame()
-    saved = engine.FUSED_MAX_N
-    if path == "per_step":
-        engine.FUSED_MAX_N = 0  # as the tests' `path` fixture forces the per-step path
-    try:
-        res = kernels.run(scenario, sink=sink)
-    finally:
-        engine.FUSED_MAX_N = saved
+    res = kernels.run(scenario, sink=sink, path=path)
     return {
         "status": res.status,
         "steps": res.steps,
@@ -106,12 +99,21 @@ def run_case(doc: dict[str, Any], path: str) -> dict[str, Any]:
 
 
 def paths_for(doc: dict[str, Any]) -> list[str]:
-    """The engine paths that apply to a scenario: per-step always, fused where chosen."""
+    """The schedules that apply to a scenario: per-step always, fused where "auto" takes
+    it, batched wherever it covers the scenario."""
     from flocklab.kernels import engine
     from flocklab.schemas import Scenario
 
-    fused = engine.fused_batch(Scenario.model_validate(doc), "cpu") is not None
-    return ["per_step", "fused"] if fused else ["per_step"]
+    sc = Scenario.model_validate(doc)
+    out = ["per_step"]
+    if engine.choose_path(sc, "cpu") == "fused":
+        out.append("fused")
+    try:
+        engine.schedule(sc, "cpu", "batched")
+        out.append("batched")
+    except engine.PathUnavailable:
+        pass
+    return out
 
 
 def compare(now: dict[str, Any], base: dict[str, Any]) -> list[str]:

@@ -9,7 +9,7 @@ Single runs: the xi-abed-sim3 scenario (F2, linear f, inverse g, d = 20, dt = 0.
 observables every 20 steps, no frames) with N agents on a box of side 50 sqrt(N / 100)
 (the preset's density) and `max_exact_candidates: null` (always exact, so that N = 1000
 may take the fused path too), through `kernels.run`, compile excluded by a warm-up run.
-The per-step path is forced with `kernels.engine.FUSED_MAX_N = 0`. Then a preset
+The per-step path is taken with `kernels.run(..., path="per_step")`. Then a preset
 (xi-abed-sim1 by default) at 10^4 steps on both paths. `--dim 3`: the agents in a cube of
 side 50 (N / 100)^(1/3), the leader's target (-40, -40, -40); F2's D3 is then the host's
 linear program on the fused path too (kernels/models/formation/fused.py), unless
@@ -43,12 +43,10 @@ def scenario(n: int, steps: int, dim: int = 2, observables: list[str] | None = N
 
 def timed(sc, fused: bool) -> dict:
     from flocklab import kernels
-    from flocklab.kernels import engine
 
-    engine.FUSED_MAX_N = 20_000 if fused else 0
     load = os.getloadavg()[0]
     w0, c0 = time.perf_counter(), time.process_time()
-    res = kernels.run(sc)
+    res = kernels.run(sc, path="fused" if fused else "per_step")
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
     assert res.status == "completed", res.error
     assert res.extra["engine_path"] == ("fused" if fused else "per_step")

@@ -75,13 +75,12 @@ def tanner_3d(n: int, steps: int) -> Scenario:
 
 def timed(sc: Scenario, fused: bool) -> dict:
     from flocklab import kernels
-    from flocklab.kernels import engine
 
-    engine.FUSED_MAX_N = 20_000 if fused else 0
+    path = "fused" if fused else "per_step"
     kernels.run(Scenario.model_validate({**sc.model_dump(mode="json"),
-                                         "time": {"steps": 2, "dt": sc.time.dt}}))
+                                         "time": {"steps": 2, "dt": sc.time.dt}}), path=path)
     w0, c0 = time.perf_counter(), time.process_time()
-    res = kernels.run(sc)
+    res = kernels.run(sc, path=path)
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
     assert res.extra["engine_path"] == ("fused" if fused else "per_step")
     return {"path": res.extra["engine_path"], "status": res.status, "steps": res.steps,

@@ -128,14 +128,9 @@ def warm(name: str, sc: Scenario) -> None:
     """Compile `sc`'s kernels on its own path and on the per-step path."""
     t0 = time.perf_counter()
     paths = [engine.run(sc, sink=Discard()).extra.get("engine_path", "?")]
-    if paths[0] == "fused":
-        # The per-step path runs these models above FUSED_MAX_N (or off the CPU): the
-        # bound is read at each call, so lowering it here routes the run there.
-        saved, engine.FUSED_MAX_N = engine.FUSED_MAX_N, -1
-        try:
-            paths.append(engine.run(sc, sink=Discard()).extra.get("engine_path", "?"))
-        finally:
-            engine.FUSED_MAX_N = saved
+    if paths[0] != "per_step":
+        # The per-step schedule runs these models above FUSED_MAX_N (or off the CPU).
+        paths.append(engine.run(sc, sink=Discard(), path="per_step").extra["engine_path"])
     print(f"warm: {name} N={sc.n_agents} threads={sc.threads} paths={'+'.join(paths)} "
           f"{time.perf_counter() - t0:.1f}s", flush=True)
 

@@ -17,7 +17,8 @@ os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 # The public names load on first use (PEP 562): the engine imports Taichi (~0.8 s), and
 # the numpy-only parts of the model packages (leader paths, fixed graphs, offset
 # schedules, which `flocklab render` draws from) must not pay for it.
-_PUBLIC = {"run": "engine", "run_batch": "engine", "BackendUnavailable": "result",
+_PUBLIC = {"run": "engine", "run_batch": "engine", "PATHS": "engine",
+           "PathUnavailable": "engine", "BackendUnavailable": "result",
            "FrameSink": "result", "RunResult": "result", "SimulationDiverged": "result"}
 
 __all__ = sorted(_PUBLIC)

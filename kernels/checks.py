@@ -57,3 +57,11 @@ def warnings(checks: dict[str, Any]) -> list[str]:
             f"({c['claim']}): dt is too large for the dynamics (a pair pressed close); "
             "try a smaller time.dt"
             for name, c in checks.items() if not c["held"]]
+
+
+def time_to_converge(t: np.ndarray, values: np.ndarray, tol: float) -> float | None:
+    """First time after which `values` stays below `tol` to the end (None: never)."""
+    if len(values) == 0 or not values[-1] < tol:
+        return None
+    above = np.nonzero(~(values < tol))[0]
+    return float(t[0] if len(above) == 0 else t[above[-1] + 1])

@@ -1,34 +1,46 @@
-"""The one engine entry: `run(scenario) -> RunResult`.
+"""The one engine entry: `run(scenario, path=...) -> RunResult`, and `run_batch`.
 
 Called by the CLI, the service's worker processes and any batch driver alike. It knows
 nothing of jobs, HTTP or files: frames go to a `FrameSink`, progress to a callback, and
-cancellation comes from polling `should_stop` between steps.
+cancellation comes from polling `should_stop` between windows. It picks the schedule (the
+per-step, fused or batched `Replicas` of the scenario's model) and hands it to the one
+driver, kernels/driver.py.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Sequence
-
-import numpy as np
 
 from flocklab.schemas import Scenario
 
-from . import batch, runtime
-from .checks import run_checks
-from .live import OBSERVATIONS_INTERVAL, ObservationFeed, ObservationsFn
-from .model import ModelKernel, kernel_for
-from .result import FrameSink, RunResult, SimulationDiverged
+from . import runtime
+from .driver import Hooks, ProgressFn, StopFn, run_replicas
+from .live import OBSERVATIONS_INTERVAL, ObservationsFn
+from .model import kernel_for
+from .per_step import PerStep
+from .replicas import Replicas
+from .result import FrameSink, RunResult
 
-ProgressFn = Callable[[int, int], None]
-StopFn = Callable[[], bool]
-PROGRESS_INTERVAL = 0.2  # seconds between progress callbacks
-STOP_INTERVAL = 0.05  # seconds between cancellation polls
+PATHS = ("auto", "per_step", "fused", "batched")
+# The fused schedule runs one replica per CPU task, serially inside: it beats the per-step
+# one (parallel over agents, one launch per pass) up to about this N on this CPU.
+FUSED_MAX_N = 10_000
+# Replicas per fused or batched launch: enough to fill the cores, few enough to poll for a
+# stop.
+BATCH_AGENTS = 400_000
+# The fused schedule writes each observation's step number into a row of the kernels' float
+# type: exact below 2^24 in float32, so longer float32 runs take the per-step schedule.
+FUSED_MAX_STEPS_FLOAT32 = 2**24
+
+
+class PathUnavailable(ValueError):
+    """The schedule asked for (`path=`) does not cover this scenario; the message says why."""
 
 
 def run(
     scenario: Scenario,
     *,
+    path: str = "auto",
     sink: FrameSink | None = None,
     on_progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
@@ -37,163 +49,94 @@ def run(
 ) -> RunResult:
     """Run `scenario` to the end, to cancellation, or to numerical blow-up.
 
-    Observables are evaluated every `recording.observables_every` steps and at the end;
-    frames every `recording.every` steps and at the end. A blow-up returns status
-    "diverged" with the step and likely cause; what was recorded before it is kept.
-    `on_observations` gets the observation rows computed so far while the run goes on, in
-    batches at most every `observations_interval` seconds (see kernels/live.py); the
+    `path` is the schedule: "per_step", "fused", "batched", or "auto" (decided from the
+    scenario and the backend alone, `choose_path`); the result's `extra["engine_path"]`
+    names the one that ran. Observables are evaluated every `recording.observables_every`
+    steps and at the end; frames every `recording.every` steps and at the end. A blow-up
+    returns status "diverged" with the step and likely cause; what was recorded before it
+    is kept. `on_observations` gets the observation rows computed so far while the run goes
+    on, in batches at most every `observations_interval` seconds (see kernels/live.py); the
     result's `observables` hold them all.
     """
     rt = runtime.ensure(scenario.backend, scenario.threads, scenario.precision)
-    make = fused_batch(scenario, rt.backend)
-    if make is not None:
-        return batch.run_batch(make, [scenario], backend=rt.backend, sinks=[sink],
-                               on_progress=on_progress, should_stop=should_stop,
-                               on_observations=on_observations,
-                               observations_interval=observations_interval)[0]
-    t0 = time.perf_counter()
-    model: ModelKernel = kernel_for(scenario.model.kind)(scenario, rt.policy)
-    setup_seconds = time.perf_counter() - t0
-    rec = scenario.recording
-    steps = scenario.time.steps
-    dt = scenario.time.dt
-    arrays = [a for a in rec.arrays if a in type(scenario.model).state_arrays]
-    derived = rec.derived  # degree, radius: computed from the state at the frame's step
-    series: dict[str, list[float]] = {"step": [], "time": []}
-    status, error, done = "completed", None, 0
-    last_progress = last_poll = time.perf_counter()
-    feed = (None if on_observations is None
-            else ObservationFeed(on_observations, rec.observables, observations_interval))
+    name, make = schedule(scenario, rt.backend, path)
+    hooks = Hooks(on_progress, should_stop, on_observations, observations_interval)
+    return run_replicas(make, [scenario], path=name, backend=rt.backend, sinks=[sink],
+                        hooks=hooks)[0]
 
-    def observe(step: int) -> None:
-        values = model.observe(step)
-        series["step"].append(step)
-        series["time"].append(step * dt)
-        for k, v in values.items():
-            series.setdefault(k, []).append(v)
 
-    def record(step: int) -> None:
-        if sink is not None and rec.enabled and (arrays or derived):
-            values = model.frame(arrays)
-            if derived:
-                values.update(model.derived_arrays(step, derived))
-            sink.frame(step, step * dt, values)
+def _uncovered(scenario: Scenario, backend: str, path: str) -> str | None:
+    """Why the schedule `path` ("fused" or "batched") cannot run `scenario` on `backend`
+    (None: it can)."""
+    cls = getattr(kernel_for(scenario.model.kind), path)
+    if cls is None:
+        return f"model {scenario.model.kind!r} has none"
+    if path == "fused" and backend != "cpu":
+        return "it runs on the CPU backend only (a GPU wants parallel agents)"
+    if path == "fused" and scenario.precision == "float32" and (
+            scenario.time.steps >= FUSED_MAX_STEPS_FLOAT32):
+        return (f"float32 runs of {FUSED_MAX_STEPS_FLOAT32} steps or more take the per-step "
+                "schedule (the step numbers of its observations would round)")
+    if scenario.dimension not in cls.dimensions:
+        return f"it runs space.dimension {' or '.join(map(str, cls.dimensions))} only"
+    if scenario.recording.enabled and scenario.recording.derived:
+        return "it records no derived arrays (recording.derived: take the per-step schedule)"
+    if cls.batch_key(scenario) is None:
+        return "it does not cover this scenario's options (e.g. the integrator)"
+    return None
 
-    try:
-        for step in range(steps):
-            if step % rec.observables_every == 0:
-                observe(step)
-            if rec.enabled and step % rec.every == 0:
-                record(step)
-            model.step(step)
-            done = step + 1
-            now = time.perf_counter()
-            if should_stop is not None and now - last_poll >= STOP_INTERVAL:
-                last_poll = now
-                if should_stop():
-                    status = "cancelled"
-                    break
-            if on_progress is not None and now - last_progress >= PROGRESS_INTERVAL:
-                last_progress = now
-                on_progress(done, steps)
-            if feed is not None and feed.due(now):
-                feed.send(series, now)
-        # The final state, observed (its grid build may still find a runaway) and recorded.
-        if not series["step"] or series["step"][-1] != done:
-            observe(done)
-        record(done)
-    except SimulationDiverged as exc:
-        status = "diverged"
-        error = {
-            "step": exc.step,
-            "time": exc.step * dt,
-            "quantity": exc.quantity,
-            "cause": exc.cause,
-            "message": str(exc),
-        }
-    if status != "diverged" and on_progress is not None:
-        on_progress(done, steps)
-    wall = time.perf_counter() - t0
-    obs = {k: np.asarray(v, dtype=np.float64) for k, v in series.items()
-           if k in ("step", "time") or rec.wants(k)}
-    final = {k: float(v[-1]) for k, v in obs.items() if len(v)}
-    tol = scenario.convergence.tolerance
-    convergence = {k: time_to_converge(obs["time"], obs[k], tol)
-                   for k in model.convergence_keys() if k in obs}
-    return RunResult(
-        status=status,
-        backend=rt.backend,
-        steps=done,
-        wall_seconds=wall,
-        n_agents=scenario.n_agents,
-        observables=obs,
-        final=final,
-        convergence=convergence,
-        extra={"setup_seconds": setup_seconds, "engine_path": "per_step", **model.extra(),
-               **run_checks(scenario, obs)},
-        error=error,
-    )
+
+def choose_path(scenario: Scenario, backend: str) -> str:
+    """The schedule "auto" takes: decided from the scenario and the backend alone, so a
+    run's bits never depend on the company it keeps. The fused one on the CPU up to
+    FUSED_MAX_N agents where it covers the scenario, else the per-step one."""
+    if scenario.n_agents <= FUSED_MAX_N and _uncovered(scenario, backend, "fused") is None:
+        return "fused"
+    return "per_step"
+
+
+def schedule(scenario: Scenario, backend: str, path: str = "auto"
+             ) -> tuple[str, Callable[[list[Scenario]], Replicas]]:
+    """(the schedule's name, its `Replicas` class) for `scenario` on `backend`. Raises
+    PathUnavailable when an explicitly asked-for schedule does not cover it."""
+    if path not in PATHS:
+        raise PathUnavailable(f"path {path!r}: one of {', '.join(PATHS)}")
+    if path == "auto":
+        path = choose_path(scenario, backend)
+    if path == "per_step":
+        return path, PerStep
+    why = _uncovered(scenario, backend, path)
+    if why is not None:
+        raise PathUnavailable(f"the {path} schedule is not available here: {why}")
+    return path, getattr(kernel_for(scenario.model.kind), path)
 
 
 ResultFn = Callable[[int, RunResult], None]
-# The small-N path runs one replica per CPU task, serially inside: it beats the per-step
-# path (parallel over agents, one launch per pass) up to about this N on this CPU.
-FUSED_MAX_N = 10_000
-# Replicas per fused launch: enough to fill the cores, few enough to poll for a stop.
-BATCH_AGENTS = 400_000
-# The fused path writes each observation's step number into a row of the kernels' float
-# type: exact below 2^24 in float32, so longer float32 runs take the per-step path.
-FUSED_MAX_STEPS_FLOAT32 = 2**24
-
-
-def _fused_key(scenario: Scenario):
-    """The fused batch key of `scenario` (None: the per-step path), backend aside."""
-    cls = kernel_for(scenario.model.kind).batch
-    if cls is None or scenario.n_agents > FUSED_MAX_N or (
-            scenario.precision == "float32"
-            and scenario.time.steps >= FUSED_MAX_STEPS_FLOAT32):
-        return None
-    if scenario.dimension not in cls.dimensions:  # e.g. a 2D-only fused kernel in 3D
-        return None
-    if scenario.recording.enabled and scenario.recording.derived:
-        return None  # the fused kernels keep no per-agent degree or radius at frame steps
-    return cls.batch_key(scenario)
-
-
-def fused_batch(scenario: Scenario, backend: str) -> Callable | None:
-    """The fused small-N batch class for `scenario`, or None for the per-step path. Decided
-    from the scenario (and the backend that runs it) alone, so a run's bits never depend
-    on the company it keeps."""
-    if backend != "cpu" or _fused_key(scenario) is None:
-        return None
-    return kernel_for(scenario.model.kind).batch
 
 
 def run_batch(
     scenarios: Sequence[Scenario],
     *,
+    path: str = "auto",
     on_result: ResultFn | None = None,
     should_stop: StopFn | None = None,
 ) -> list[RunResult]:
     """Run many scenarios (a sweep's runs); results in input order.
 
-    Each result is bit-identical to `run(scenario)` alone: the engine path is chosen from
-    each scenario by itself, never from its companions. `on_result(index, result)` is
+    Each result is bit-identical to `run(scenario, path=path)` alone: the schedule is chosen
+    from each scenario by itself, never from its companions. `on_result(index, result)` is
     called as each run finishes. Once `should_stop()` is true, the runs in progress end
     "cancelled" and the runs not yet started are left out of the returned list.
     """
     results: dict[int, RunResult] = {}
-    for group in _batches(scenarios):
+    for group in _batches(scenarios, path):
         if should_stop is not None and should_stop():
             break
         first = scenarios[group[0]]
         rt = runtime.ensure(first.backend, first.threads, first.precision)
-        make = fused_batch(first, rt.backend)
-        if make is None:
-            done = [run(first, should_stop=should_stop)]
-        else:
-            done = batch.run_batch(make, [scenarios[i] for i in group], backend=rt.backend,
-                                   should_stop=should_stop)
+        name, make = schedule(first, rt.backend, path)
+        done = run_replicas(make, [scenarios[i] for i in group], path=name,
+                            backend=rt.backend, hooks=Hooks(should_stop=should_stop))
         for i, res in zip(group, done, strict=True):
             results[i] = res
             if on_result is not None:
@@ -201,28 +144,29 @@ def run_batch(
     return [results[i] for i in sorted(results)]
 
 
-def _batches(scenarios: Sequence[Scenario]) -> list[list[int]]:
-    """Indices grouped into launches: same backend, threads, precision and fused batch key,
-    at most BATCH_AGENTS agents each; a per-step scenario is a group of its own."""
+def _group_key(scenario: Scenario, path: str) -> tuple | None:
+    """The launch group of `scenario` (None: a group of its own, the per-step schedule)."""
+    name, make = schedule(scenario, runtime.resolve_backend(scenario.backend), path)
+    if name == "per_step":
+        return None
+    return (scenario.backend, scenario.threads, scenario.precision, name,
+            make.batch_key(scenario))
+
+
+def _batches(scenarios: Sequence[Scenario], path: str = "auto") -> list[list[int]]:
+    """Indices grouped into launches: same backend, threads, precision, schedule and batch
+    key, at most BATCH_AGENTS agents each; a per-step scenario is a group of its own."""
     groups: dict[tuple, list[list[int]]] = {}
     out: list[list[int]] = []
     for i, sc in enumerate(scenarios):
-        key = _fused_key(sc)
+        key = _group_key(sc, path)
         if key is None:
             out.append([i])
             continue
-        lanes = groups.setdefault((sc.backend, sc.threads, sc.precision, key), [[]])
+        lanes = groups.setdefault(key, [[]])
         if lanes[-1] and sum(scenarios[j].n_agents for j in lanes[-1]) + sc.n_agents > (
                 BATCH_AGENTS):
             lanes.append([])
         lanes[-1].append(i)
     out.extend(g for lanes in groups.values() for g in lanes if g)
     return sorted(out)
-
-
-def time_to_converge(t: np.ndarray, values: np.ndarray, tol: float) -> float | None:
-    """First time after which `values` stays below `tol` to the end (None: never)."""
-    if len(values) == 0 or not values[-1] < tol:
-        return None
-    above = np.nonzero(~(values < tol))[0]
-    return float(t[0] if len(above) == 0 else t[above[-1] + 1])

@@ -1,6 +1,7 @@
 """The interface every model kernel implements, and the kernel registry.
 
-The engine drives a `ModelKernel` through `observe -> step -> ... -> observe`; it knows
+A `ModelKernel` is one replica on the per-step schedule (kernels/per_step.py drives it
+through `observe -> step -> ... -> observe`); the engine knows
 nothing of any model's equations. A new model family is one module with a subclass
 decorated `@register_kernel` in its package under `kernels/models/`, named in `MODULES`
 below.
@@ -27,8 +28,11 @@ class ModelKernel(ABC):
     """
 
     kind: ClassVar[str]
-    # The fused small-N batch (many steps of many replicas per launch), if the model has one.
-    batch: ClassVar[Any] = None
+    # The model's other schedules (`Replicas` classes, kernels/replicas.py), where it has
+    # them: fused (many steps of many replicas per launch, one replica per CPU task) and
+    # batched (every replica's agents in one launch per step).
+    fused: ClassVar[Any] = None
+    batched: ClassVar[Any] = None
 
     def __init__(self, scenario: Scenario, policy: DevicePolicy):
         self.scenario = scenario

@@ -69,8 +69,20 @@ class VicsekParams(ModelParams):
     track_linked_intervals: StrictBool | None = Field(
         default=None,
         description="Track Theorem 2's 'linked together' intervals (one union-find pass per "
-        "step). null: on when N <= 100000.",
+        "step; the linked_intervals observable and summary entry). null: on when "
+        "recording.observables names linked_intervals, or when it is null and the rule is "
+        "one whose theorem the intervals check (average and laplacian: Theorem 2; leader: "
+        "Theorem 4, a union graph connected over all agents links every follower to the "
+        "leader) with N <= 100000; off for the vicsek rule, which no theorem covers.",
     )
+
+    def tracks_linked(self, n_agents: int, observables: list[str] | None) -> bool:
+        """Whether a run tracks the linked intervals (`track_linked_intervals`)."""
+        if self.track_linked_intervals is not None:
+            return self.track_linked_intervals
+        if observables is not None:
+            return "linked_intervals" in observables
+        return self.rule in ("average", "laplacian", "leader") and n_agents <= 100_000
 
     def check_context(self, ctx: ModelContext) -> None:
         if ctx.radius is None:

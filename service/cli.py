@@ -38,6 +38,7 @@ from flocklab.schemas.vicsek_presets import DEFAULT_PRESET
 
 from .cli_extras import EXIT_MISSING_EXTRA, MissingExtra, require_extras, version
 from .cli_models import model_details, print_model
+from .progress import ProgressBar
 
 EXIT_OK, EXIT_RUN_FAILED, EXIT_BAD_INPUT, EXIT_BACKEND = 0, 1, 2, 3
 
@@ -122,33 +123,11 @@ def load_sweep_source(source: str) -> Sweep:
         raise BadInput(_problems(source, exc.errors)) from exc
 
 
-class ProgressBar:
-    """A one-line progress bar on a terminal; silent when stderr is not a terminal."""
-
-    def __init__(self, enabled: bool, unit: str = "step"):
-        self.enabled = enabled
-        self.unit = unit
-        self.t0 = time.perf_counter()
-
-    def __call__(self, done: int, total: int) -> None:
-        if not self.enabled:
-            return
-        frac = done / total if total else 1.0
-        elapsed = time.perf_counter() - self.t0
-        eta = elapsed * (1 - frac) / frac if frac > 0 else 0.0
-        bar = "#" * int(30 * frac)
-        sys.stderr.write(f"\r[{bar:<30}] {100 * frac:5.1f}%  {self.unit} {done}/{total}  "
-                         f"eta {eta:6.1f}s")
-        if done >= total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
-
-
 def cmd_run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario, args.set or ())
     if args.backend:
         scenario = scenario.model_copy(update={"backend": args.backend})
-    from flocklab.kernels import BackendUnavailable
+    from flocklab.kernels import BackendUnavailable, PathUnavailable
     from flocklab.kernels.checks import warnings as check_warnings
 
     from .execute import execute_to_dir
@@ -159,10 +138,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         with stop:
             summary = execute_to_dir(
                 scenario, Path(args.out), on_progress=ProgressBar(show), should_stop=stop,
-                overwrite=args.overwrite, stopped_status="interrupted",
+                overwrite=args.overwrite, stopped_status="interrupted", path=args.path,
             )
     except FileExistsError as exc:
         raise BadInput(f"{exc}; pass --overwrite to replace it") from exc
+    except PathUnavailable as exc:
+        raise BadInput(f"--path {args.path}: {exc}") from exc
     except BackendUnavailable as exc:
         print(f"flocklab: {exc}", file=sys.stderr)
         return EXIT_BACKEND
@@ -351,6 +332,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder (created atomically)")
     p.add_argument("--backend", choices=["cpu", "cuda", "vulkan", "auto"],
                    help="override the scenario's backend")
+    p.add_argument("--path", choices=["auto", "per_step", "fused", "batched"], default="auto",
+                   help="the engine's schedule (default auto: chosen from the scenario "
+                   "and the backend; summary.json's engine_path says which ran)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--set", action="append", metavar="PATH=VALUE",

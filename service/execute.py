@@ -63,10 +63,12 @@ def execute_to_dir(
     overwrite: bool = False,
     on_result: Callable[[RunResult], None] | None = None,
     stopped_status: str = "cancelled",
+    path: str = "auto",
 ) -> dict[str, Any]:
-    """Run `scenario` and write its artifacts to `out_dir`. Returns the summary dict;
-    `on_result` gets the engine's result before the folder is moved into place. A run
-    that `should_stop` ended is written with status `stopped_status`."""
+    """Run `scenario` on the engine's schedule `path` and write its artifacts to
+    `out_dir`. Returns the summary dict; `on_result` gets the engine's result before the
+    folder is moved into place. A run that `should_stop` ended is written with status
+    `stopped_status`."""
     from flocklab import kernels  # the engine: only where a simulation runs
 
     from .h5md import H5MDWriter
@@ -85,7 +87,7 @@ def execute_to_dir(
         try:
             result = kernels.run(
                 scenario, sink=writer, on_progress=on_progress, should_stop=should_stop,
-                on_observations=live.append,
+                on_observations=live.append, path=path,
             )
             writer.write_observables(result.observables)
         finally:

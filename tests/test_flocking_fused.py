@@ -154,8 +154,7 @@ def test_the_fused_path_agrees_with_the_per_step_path(taichi_cpu, monkeypatch, c
     sc = with_recording(AGREEMENT[case], every=10)
     fused_sink, step_sink = Frames(), Frames()
     fused = kernels.run(sc, sink=fused_sink)
-    monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
-    per_step = kernels.run(sc, sink=step_sink)
+    per_step = kernels.run(sc, sink=step_sink, path="per_step")
     assert (fused.extra["engine_path"], per_step.extra["engine_path"]) == ("fused", "per_step")
     assert fused.status == per_step.status == "completed"
     assert list(fused.observables) == list(per_step.observables)
@@ -218,21 +217,21 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     euler = m2_scenario(n=10, steps=1)
     rk4 = m2_scenario(n=10, steps=1, integrator="rk4")
     min_rule = m3_scenario(n=5, steps=1, radius_rule="min")
-    assert engine.fused_batch(euler, "cpu") is flocking_fused.FlockingBatch
-    assert engine.fused_batch(MIXES["mission"][0], "cpu") is flocking_fused.FlockingBatch
-    assert engine.fused_batch(rk4, "cpu") is None
-    assert engine.fused_batch(min_rule, "cpu") is None
-    assert engine.fused_batch(euler, "cuda") is None
+    assert engine.schedule(euler, "cpu")[1] is flocking_fused.FlockingBatch
+    assert engine.schedule(MIXES["mission"][0], "cpu")[1] is flocking_fused.FlockingBatch
+    assert engine.choose_path(rk4, "cpu") == "per_step"
+    assert engine.choose_path(min_rule, "cpu") == "per_step"
+    assert engine.choose_path(euler, "cuda") == "per_step"
     mixed = [euler, rk4, MIXES["fixed"][0], euler, MIXES["mission"][0]]
     assert sorted(map(sorted, engine._batches(mixed))) == [[0, 3], [1], [2], [4]]
     assert kernels.run(rk4).extra["engine_path"] == "per_step"
     # 3D: M2 and M3 fused, in launches of their own, apart from 2D
     flat = MIXES["switching"][0]
     deep = MIXES["switching-3d"][0]
-    assert engine.fused_batch(deep, "cpu") is flocking_fused.FlockingBatch
-    assert engine.fused_batch(MIXES["fixed-3d"][0], "cpu") is flocking_fused.FlockingBatch
-    assert engine.fused_batch(m3_scenario_3d(steps=1), "cpu") is flocking_fused.FlockingBatch
-    assert engine.fused_batch(m3_scenario_3d(steps=1, radius_rule="min"), "cpu") is None
+    assert engine.schedule(deep, "cpu")[1] is flocking_fused.FlockingBatch
+    assert engine.schedule(MIXES["fixed-3d"][0], "cpu")[1] is flocking_fused.FlockingBatch
+    assert engine.schedule(m3_scenario_3d(steps=1), "cpu")[1] is flocking_fused.FlockingBatch
+    assert engine.choose_path(m3_scenario_3d(steps=1, radius_rule="min"), "cpu") == "per_step"
     assert sorted(map(sorted, engine._batches([flat, deep, flat, deep]))) == [[0, 2], [1, 3]]
     mission = [MIXES["mission"][0], MIXES["mission-3d"][0], MIXES["mission"][1]]
     assert sorted(map(sorted, engine._batches(mission))) == [[0, 2], [1]]
@@ -252,8 +251,7 @@ def test_a_runaway_swarm_is_reported_as_the_per_step_path_reports_it(taichi_cpu,
         "neighbours": {"radius": 2.0}, "initial": init, "time": {"steps": 20, "dt": 0.01},
     })
     fused = kernels.run(sc)
-    monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
-    per_step = kernels.run(sc)
+    per_step = kernels.run(sc, path="per_step")
     assert fused.extra["engine_path"] == "fused" and fused.status == "diverged"
     assert fused.error == per_step.error
     limit = 30 if dim == 2 else 20

@@ -236,7 +236,7 @@ class FusedKernel:
         return {k: float(v[row]) for k, v in obs.items() if k != "step"}
 
     def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
-        return self.batch.frame(0, arrays)
+        return self.batch.frame(0, arrays, self.done)
 
     def extra(self):
         return self.batch.extra(0, self.batch.status())
@@ -249,14 +249,14 @@ class FusedKernel:
 def fused_or_skip(path: str, sc: Scenario, variant: bool = False) -> None:
     """Skip the fused run of a per-step variant (rk4, M3's radius_rule min: the engine
     runs them per step; variant: the hashed grid, a per-step concept)."""
-    if path == "fused" and (variant or kernels.engine.fused_batch(sc, "cpu") is None):
+    if path == "fused" and (variant or kernels.engine.choose_path(sc, "cpu") == "per_step"):
         pytest.skip("a per-step path variant")
 
 
 def make_kernel(sc: Scenario, hashed: bool = False, path: str = "per_step"):
     """The scenario's kernel; hashed: never use the dense plane grid (test the engine's).
     path "fused": the fused batch where the engine would take it (`FusedKernel`)."""
-    if path == "fused" and kernels.engine.fused_batch(sc, "cpu") is not None:
+    if path == "fused" and kernels.engine.choose_path(sc, "cpu") == "fused":
         return FusedKernel(sc)
     # hashed: the policy of a device without the dense grid (a GPU's), on the CPU.
     policy = DevicePolicy(serial_scatter=True, dense_grid=not hashed)

@@ -184,8 +184,7 @@ def test_divergence_has_the_per_step_step_and_cause(taichi_cpu, monkeypatch, int
                              [3.0, 0.0, 0.0][:dim]], steps=20)
     sc = scenario_in(dim, dict(m, integrator=integrator), every=0, **kw)
     fused = kernels.run(sc)
-    monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
-    per_step = kernels.run(sc)
+    per_step = kernels.run(sc, path="per_step")
     assert (fused.extra["engine_path"], per_step.extra["engine_path"]) == ("fused",
                                                                          "per_step")
     assert fused.status == per_step.status == "diverged"
@@ -204,16 +203,16 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     assert FormationBatch.batch_key(scenario(exact, N=MAX_N + 1)) is None
     assert FormationBatch.batch_key(scenario(m, N=1)) is None
     small = scenario(m, N=20, steps=2)
-    assert engine.fused_batch(small, "cpu") is FormationBatch
-    assert engine.fused_batch(small, "cuda") is None
+    assert engine.schedule(small, "cpu")[1] is FormationBatch
+    assert engine.choose_path(small, "cuda") == "per_step"
     assert kernels.run(scenario(m, N=114, steps=2)).extra["engine_path"] == "per_step"
     # 3D: F1 and F2 are fused (in one launch, never with 2D; F2's D3 from snapshots).
     f1 = scenario_in(3, {"path": STRAIGHT_3D, "formation": {"kind": "named", "shape": "cube"}},
                      N=20, steps=2)
-    assert engine.fused_batch(f1, "cpu") is FormationBatch
+    assert engine.schedule(f1, "cpu")[1] is FormationBatch
     assert len(engine._batches([small, f1])) == 2
     f2 = scenario_in(3, {"design": "F2", "path": STRAIGHT_3D}, N=20, steps=2)
-    assert engine.fused_batch(f2, "cpu") is FormationBatch
+    assert engine.schedule(f2, "cpu")[1] is FormationBatch
     assert len(engine._batches([f1, f2])) == 1
     assert kernels.run(f2).extra["engine_path"] == "fused"
 
@@ -267,15 +266,13 @@ CHAIN = {2: ({"kind": "named", "shape": "wedge"}, SCHEDULE, STRAIGHT, SPLINE),
              STRAIGHT_3D, SPLINE_3D)}
 
 
-def on_both_paths(sc, monkeypatch):
+def on_both_paths(sc):
     """(result, frames) of the fused path, then of the per-step path; every observable of
     the one within 1e-12 of the other's."""
     runs = []
     for name in ("fused", "per_step"):
-        if name == "per_step":
-            monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
         sink = Frames()
-        res = kernels.run(sc, sink=sink)
+        res = kernels.run(sc, sink=sink, path=name)
         assert res.extra["engine_path"] == name and res.status == "completed", res.error
         runs.append((res, sink))
     (a, _), (b, _) = runs
@@ -298,7 +295,7 @@ def test_both_paths_agree_through_a_chain_of_formation_changes(taichi_cpu, monke
              schedule=schedule, integrator=integrator)
     sc = scenario_in(dim, m, N=9, steps=40, every=8, arrays=("position", "velocity"),
                      obs_every=3)
-    (a, fa), (_, fb) = on_both_paths(sc, monkeypatch)
+    (a, fa), (_, fb) = on_both_paths(sc)
     assert fa.steps == fb.steps == [*range(0, 40, 8), 40]
     for x, y in zip(fa.frames, fb.frames, strict=True):
         for k in x:
@@ -339,7 +336,7 @@ def test_both_paths_agree_on_f2_in_3d(taichi_cpu, monkeypatch, integrator, case)
     values."""
     m, kw = F2_3D[case]
     sc = scenario_in(3, dict(m, integrator=integrator), every=20, **kw)
-    (a, fa), (b, fb) = on_both_paths(sc, monkeypatch)
+    (a, fa), (b, fb) = on_both_paths(sc)
     for k in ("D1", "D2", "D3", "isolated", "components"):
         assert np.array_equal(a.observables[k], b.observables[k]), k
     assert set(a.observables["D3"]) == {0.0, 1.0}

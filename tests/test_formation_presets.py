@@ -22,17 +22,13 @@ def speed_deviation(o):
 
 @pytest.fixture(scope="module", params=["fused", "per_step"])
 def engine_path(request, taichi_cpu):
-    """Both engine paths: the fused small-N one (the default at the presets' N) and the
-    per-step one (forced by lowering the fused path's size limit)."""
-    with pytest.MonkeyPatch.context() as mp:
-        if request.param == "per_step":
-            mp.setattr(kernels.engine, "FUSED_MAX_N", 0)
-        yield request.param
+    """Both schedules: the fused one (the default at the presets' N) and the per-step one."""
+    return request.param
 
 
 @pytest.fixture(scope="module")
 def sim1(engine_path):
-    result = kernels.run(observe_only("xi-abed-sim1", 5))
+    result = kernels.run(observe_only("xi-abed-sim1", 5), path=engine_path)
     assert result.status == "completed", result.error
     return result.observables
 
@@ -74,7 +70,7 @@ def test_sim1_formation_reached_rotated_and_v1_decreasing(sim1):
 def test_sim2_tracks_a_curved_path_in_formation(engine_path):
     """Figs. 6-7: with f(s) = 0.02 (s^2 + s) the group keeps its formation along the spline,
     trailing by about the lag |a| of eq. 8, at about the leader's speed."""
-    result = kernels.run(observe_only("xi-abed-sim2", 50))
+    result = kernels.run(observe_only("xi-abed-sim2", 50), path=engine_path)
     assert result.status == "completed", result.error
     o, t = result.observables, result.observables["time"]
     late = t >= 20.0
@@ -91,7 +87,7 @@ def test_sim2_tracks_a_curved_path_in_formation(engine_path):
 def test_sim3_ends_in_an_f2_formation(engine_path):
     """Fig. 8: F2 with N = 100 ends in an F2 formation around the target (D1-D3), and V2
     (eq. 16) never increases once the leader is still."""
-    result = kernels.run(observe_only("xi-abed-sim3", 20))
+    result = kernels.run(observe_only("xi-abed-sim3", 20), path=engine_path)
     assert result.status == "completed", result.error
     o, f = result.observables, result.final
     assert (f["D1"], f["D2"], f["D3"]) == (1.0, 1.0, 1.0)

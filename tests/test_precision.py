@@ -230,12 +230,12 @@ def test_long_float32_runs_take_the_per_step_path():
     exact below 2^24 in float32: a float32 run that long goes per step (float64 does not)."""
     long = {**vk.scenario(N=50, steps=1, every=0).model_dump(mode="json"),
             "time": {"steps": 2**24, "dt": 1.0}}
-    assert kernels.engine.fused_batch(Scenario.model_validate(long), "cpu") is not None
+    assert kernels.engine.choose_path(Scenario.model_validate(long), "cpu") == "fused"
     f32_long = Scenario.model_validate({**long, "precision": "float32"})
-    assert kernels.engine.fused_batch(f32_long, "cpu") is None
+    assert kernels.engine.choose_path(f32_long, "cpu") == "per_step"
     short = Scenario.model_validate({**long, "precision": "float32",
                                      "time": {"steps": 2**24 - 1, "dt": 1.0}})
-    assert kernels.engine.fused_batch(short, "cpu") is not None
+    assert kernels.engine.choose_path(short, "cpu") == "fused"
 
 
 def test_float32_agent_within_rounding_of_L_keeps_its_neighbours(path):
@@ -274,8 +274,7 @@ def test_a_float64_run_after_a_float32_one_of_the_same_kernel_is_float64(rule, L
                      g=61.0 if rule == "laplacian" else None)
     assert kernels.run(f32(sc)).extra["engine_path"] == "fused"
     fused = kernels.run(sc)
-    monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
-    per_step = kernels.run(sc)
+    per_step = kernels.run(sc, path="per_step")
     assert (fused.extra["engine_path"], per_step.extra["engine_path"]) == ("fused", "per_step")
     for k in ("polarization", "heading_spread"):
         assert np.allclose(fused.observables[k], per_step.observables[k], rtol=0,

@@ -41,9 +41,9 @@ def recording(sc: Scenario, arrays: list[str], every: int = 1, **extra) -> Scena
     return Scenario.model_validate(doc)
 
 
-def run(sc: Scenario):
+def run(sc: Scenario, path: str = "auto"):
     sink = Frames()
-    result = kernels.run(sc, sink=sink)
+    result = kernels.run(sc, sink=sink, path=path)
     assert result.status == "completed", result.error
     return result, sink
 
@@ -204,11 +204,10 @@ def test_flocking_3d_degree(taichi_cpu):
     assert_stats(result, sink, "valency", "degree")
 
 
-def test_recording_degree_leaves_the_trajectory_alone(taichi_cpu, monkeypatch):
+def test_recording_degree_leaves_the_trajectory_alone(taichi_cpu):
     """On the per-step path, computing the degrees at frame steps changes no bit."""
-    monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
     for sc in (vicsek(N=80, steps=15), m3_scenario(n=14, steps=30, neighbour_search="grid")):
-        plain, with_degree = (run(recording(sc, ["position", *extra], 3))[1]
+        plain, with_degree = (run(recording(sc, ["position", *extra], 3), "per_step")[1]
                               for extra in ([], ["degree"]))
         for a, b in zip(plain.frames, with_degree.frames, strict=True):
             assert np.array_equal(a["position"], b["position"])

@@ -167,6 +167,23 @@ def test_linked_intervals_counted(path):
     assert li["count"] == 30 and li["longest_steps"] == 1
 
 
+@pytest.mark.parametrize("rule,observables,tracked", [
+    ("vicsek", None, False),  # no theorem covers the vicsek rule: not tracked by default
+    ("vicsek", ["polarization", "linked_intervals"], True),  # named: tracked
+    ("average", None, True),  # Theorem 2's rule: tracked by default
+    ("average", ["polarization"], False),  # a list without it: not tracked
+])
+def test_linked_intervals_are_tracked_when_asked_for(path, rule, observables, tracked):
+    sc = scenario(rule=rule, N=40, L=4.0, steps=12, every=0)
+    sc = sc.model_copy(update={"recording": sc.recording.model_copy(
+        update={"observables": observables})})
+    result = kernels.run(sc)
+    assert ("linked_intervals" in result.extra) is tracked
+    assert ("linked_intervals" in result.observables) is tracked
+    if tracked:  # dense: linked at every step
+        assert result.extra["linked_intervals"]["count"] == 12
+
+
 def test_blow_up_is_reported_with_its_step(path):
     sc = scenario(rule="vicsek", L=None, v0=1e300, steps=50, every=5)
     result = kernels.run(sc)

@@ -129,8 +129,7 @@ def test_fused_and_per_step_agree_in_3d(taichi_cpu, monkeypatch, L):
     # graph observables exactly equal (the cell budget's cube root: N = 400, 5 cells across).
     sc = scenario(N=400, L=L, eta=1.1, steps=15, every=0)
     fused = kernels.run(sc)
-    monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
-    per_step = kernels.run(sc)
+    per_step = kernels.run(sc, path="per_step")
     assert (fused.extra["engine_path"], per_step.extra["engine_path"]) == ("fused", "per_step")
     for k in ("components", "degree_mean", "degree_min", "degree_max", "isolated"):
         assert np.array_equal(fused.observables[k], per_step.observables[k]), k
@@ -141,7 +140,7 @@ def test_fused_and_per_step_agree_in_3d(taichi_cpu, monkeypatch, L):
 def test_linked_intervals_and_graph_in_3d(taichi_cpu):
     # A tight ball, every agent within r of every other: one component, all linked.
     sc = scenario(N=30, L=None, r=3.0, steps=4, region={
-        "kind": "ball", "center": [0, 0, 0], "radius": 1.0})
+        "kind": "ball", "center": [0, 0, 0], "radius": 1.0}, track_linked_intervals=True)
     result, _ = run_frames(sc)
     assert result.extra["linked_intervals"]["count"] == 4
     assert result.final["degree_mean"] == 29

@@ -126,17 +126,16 @@ def random_box(dim, L, n, eta, steps, seed, recording=None) -> Scenario:
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-def test_observing_every_step_leaves_the_trajectory_unchanged(dim, monkeypatch):
+def test_observing_every_step_leaves_the_trajectory_unchanged(dim):
     """Observed steps take the per-agent visit (with the graph), the others the by-cell
     one: a run observed every step ends on the bits of a run observed only at its ends."""
-    monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)  # the per-step path
     finals = []
     for every in (1, 30):
         sc = random_box(dim, 6.0, 2000, eta=1.5, steps=30, seed=3,
                         recording={"every": 30, "observables_every": every,
                                    "arrays": ["position", "heading"]})
         sink = Frames()
-        res = kernels.run(sc, sink=sink)
+        res = kernels.run(sc, sink=sink, path="per_step")
         assert res.status == "completed", res.error
         assert res.extra["engine_path"] == "per_step"
         assert len(res.observables["step"]) == (31 if every == 1 else 2)

@@ -79,22 +79,21 @@ def test_divergence_stops_only_its_replica(taichi_cpu):
 def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     small = scenario(N=engine.FUSED_MAX_N, L=80.0, steps=1)
     large = scenario(N=engine.FUSED_MAX_N + 1, L=80.0, steps=1)
-    assert engine.fused_batch(small, "cpu") is not None
-    assert engine.fused_batch(large, "cpu") is None
-    assert engine.fused_batch(small, "cuda") is None  # a GPU wants parallel agents
+    assert engine.choose_path(small, "cpu") == "fused"
+    assert engine.choose_path(large, "cpu") == "per_step"
+    assert engine.choose_path(small, "cuda") == "per_step"  # a GPU wants parallel agents
     groups = engine._batches([small, large, small])
     assert sorted(map(sorted, groups)) == [[0, 2], [1]]
 
 
 @pytest.mark.parametrize("per_step", [False, True], ids=["fused", "per_step"])
-def test_chosen_observables_are_the_same_numbers(taichi_cpu, monkeypatch, per_step):
-    if per_step:
-        monkeypatch.setattr(engine, "FUSED_MAX_N", 0)
-    full = kernels.run(scenario(N=150, L=7.0, eta=1.0, steps=30, every=0))
+def test_chosen_observables_are_the_same_numbers(taichi_cpu, per_step):
+    path = "per_step" if per_step else "fused"
+    full = kernels.run(scenario(N=150, L=7.0, eta=1.0, steps=30, every=0), path=path)
     sc = scenario(N=150, L=7.0, eta=1.0, steps=30, every=0)
     sc = sc.model_copy(update={"recording": sc.recording.model_copy(
         update={"observables": ["polarization", "degree_mean"]})})
-    part = kernels.run(sc)
+    part = kernels.run(sc, path=path)
     assert list(part.observables) == ["step", "time", "polarization", "degree_mean"]
     for k in part.observables:
         assert np.array_equal(part.observables[k], full.observables[k]), k

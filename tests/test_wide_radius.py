@@ -32,14 +32,6 @@ def case_id(case) -> str:
     return f"{case[0]}d-r={case[1]:.4f}L"
 
 
-@pytest.fixture(params=["fused", "per_step"])
-def path(request, monkeypatch, taichi_cpu):
-    """Both 2D engine paths: fused (the default at these N) and per-step (forced)."""
-    if request.param == "per_step":
-        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
-    return request.param
-
-
 def vicsek(dim: int, r: float, N=60, eta=0.8, steps=6, rule="vicsek", **model) -> Scenario:
     return Scenario.model_validate({
         "model": {"kind": "vicsek", "rule": rule, "v0": 0.15, "eta": eta, **model},
@@ -153,12 +145,9 @@ def test_vicsek_3d_matches_the_minimum_image_reference(taichi_cpu, frac):
 
 
 @pytest.mark.parametrize("dim,engine_path", [(2, "fused"), (2, "per_step"), (3, "per_step")])
-def test_beyond_the_half_diagonal_is_the_mean_field(taichi_cpu, monkeypatch, dim,
-                                                     engine_path):
+def test_beyond_the_half_diagonal_is_the_mean_field(taichi_cpu, dim, engine_path):
     """r = L: every pair is within r, so without noise all agents align in one step."""
-    if engine_path == "per_step":
-        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
-    result = kernels.run(vicsek(dim, L, eta=0.0, steps=3))
+    result = kernels.run(vicsek(dim, L, eta=0.0, steps=3), path=engine_path)
     assert result.extra["engine_path"] == engine_path
     obs = result.observables
     assert (obs["degree_min"] == 59).all() and (obs["components"] == 1).all()

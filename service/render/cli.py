@@ -114,7 +114,7 @@ def render(args: argparse.Namespace) -> dict[str, object]:
         return {"kind": "sweep", "measures": drawn, "axes": sweep.axes}
     run = RunData(folder)
     if args.movie:
-        from flocklab.service.cli import ProgressBar
+        from flocklab.service.progress import ProgressBar
 
         from .movie import write_movie
 

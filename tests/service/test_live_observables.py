@@ -41,17 +41,15 @@ def _preset(name: str, steps: int) -> Scenario:
     ("fused", _preset("tjp-switching", 40_000)),
     ("per_step", _scenario(100, dimension=3, every=1)),  # forced onto the per-step path
 ], ids=["vicsek-fused", "flocking-fused", "vicsek-3d-per-step"])
-def test_rows_handed_over_are_a_prefix_and_change_no_bit(path, sc, monkeypatch):
+def test_rows_handed_over_are_a_prefix_and_change_no_bit(path, sc):
     from flocklab import kernels
 
-    if path == "per_step":
-        monkeypatch.setattr(kernels.engine, "FUSED_MAX_N", 0)
-
-    alone = kernels.run(sc)
+    alone = kernels.run(sc, path=path)
     got: list[dict[str, np.ndarray]] = []
     # interval 0: rows at every progress point (per step) or window end (fused), so even
     # a short run hands some over
-    live = kernels.run(sc, on_observations=got.append, observations_interval=0.0)
+    live = kernels.run(sc, on_observations=got.append, observations_interval=0.0,
+                       path=path)
     assert live.extra["engine_path"] == path
     assert list(live.observables) == list(alone.observables)
     for k, v in alone.observables.items():

@@ -51,7 +51,7 @@ import taichi as ti
 from flocklab.schemas import Scenario
 
 from ... import runtime
-from ...batch import FusedBatch, Snapshots
+from ...replicas import FusedBatch, Snapshots
 from ...space.blocks import dense_cell, grid_row
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find_serial, union_serial
@@ -1137,7 +1137,7 @@ class FlockingBatch(FusedBatch):
             out.update({k: col[k] for k in MISSION_KEYS})
         return out
 
-    def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
+    def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
         a0, a1 = self.aoff[b], self.aoff[b + 1]
         out = {}
         if "position" in arrays:

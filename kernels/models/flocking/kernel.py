@@ -71,7 +71,7 @@ class Flock(ModelKernel):
     `fixed` (N_i from the scenario's graph) or metric neighbours within `radii`, and
     `mission`. The registered models below and in obstacles.py choose the parts."""
 
-    batch = FlockingBatch  # M2 and M3 on the fused small-N path
+    fused = FlockingBatch  # M2 and M3 on the fused small-N path
 
     def __init__(self, scenario: Scenario, policy: DevicePolicy, fixed: bool,
                  radii: UniformRadius | AgentRadii, mission: NoMission | Mission):

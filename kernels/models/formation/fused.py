@@ -52,7 +52,7 @@ from flocklab.schemas.formation import (
 )
 
 from ... import runtime
-from ...batch import FusedBatch, Snapshots
+from ...replicas import FusedBatch, Snapshots
 from ...space.cells import SPREAD
 from ...space.grid import row as row_of
 from ...space.grid import runaway_cause, widen
@@ -401,7 +401,7 @@ class FormationBatch(FusedBatch):
             out["D3"] = self.d3[b][:len(rows)].copy()
         return out
 
-    def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
+    def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
         a0, a1 = self.aoff[b], self.aoff[b + 1]
         a = self.args
         out = {}

@@ -181,7 +181,7 @@ def formation_kernels(fkind: int, gkind: int, f1: bool, blend: bool, inclusive: 
 @register_kernel
 class FormationKernel(ModelKernel):
     kind = "formation"
-    batch = FormationBatch
+    fused = FormationBatch
 
     def __init__(self, scenario: Scenario, policy: DevicePolicy):
         super().__init__(scenario, policy)

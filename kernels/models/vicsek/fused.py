@@ -32,7 +32,7 @@ import taichi as ti
 from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
 from ... import runtime
-from ...batch import FusedBatch, host_array
+from ...replicas import FusedBatch, host_array
 from ...space import rng, trig
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import union_serial
@@ -72,9 +72,9 @@ def _key(kseed, step):
 
 
 def _tracks(scenario: Scenario) -> bool:
-    """Whether the run tracks Theorem 2's linked intervals (by default up to 10^5 agents)."""
-    track = scenario.model.track_linked_intervals  # type: ignore[union-attr]
-    return scenario.n_agents <= 100_000 if track is None else bool(track)
+    """Whether the run tracks Theorem 2's linked intervals (`tracks_linked`)."""
+    return scenario.model.tracks_linked(  # type: ignore[union-attr]
+        scenario.n_agents, scenario.recording.observables)
 
 
 @cache
@@ -735,7 +735,7 @@ class VicsekBatch(FusedBatch):
         keep = [c for c in keep if self.scenarios[b].recording.wants(c)]
         return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
 
-    def frame(self, b: int, arrays: list[str]) -> dict[str, np.ndarray]:
+    def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
         a0, a1 = self.aoff[b], self.aoff[b + 1]
         out = {}
         e = self.host("ew")[a0:a1]

@@ -69,7 +69,7 @@ def _largest_gap(lo: nd, hi: nd, nb: ti.i32) -> float:
 @register_kernel
 class VicsekKernel(ModelKernel):
     kind = "vicsek"
-    batch = VicsekBatch
+    fused = VicsekBatch
 
     def __init__(self, scenario: Scenario, policy: DevicePolicy):
         super().__init__(scenario, policy)
@@ -114,8 +114,7 @@ class VicsekKernel(ModelKernel):
             self.kernel = block_step_kernel(scenario.inclusive,
                                             p.position_update == "new_heading", dim)
         self.kernel_with_graph = step_kernel(*variant, True, dim)
-        track = p.track_linked_intervals
-        self.track = n <= 100_000 if track is None else track
+        self.track = p.tracks_linked(n, scenario.recording.observables)
         if self.track:
             self.parent_u = ti.ndarray(ti.i32, shape=n)
             reset_parent(self.parent_u)
