@@ -5,7 +5,7 @@
     python -m bench.ray_bench --warm       # its warm (long-lived driver) pass only
     python -m bench.ray_bench --fig2a      # the reduced Fig. 2a table check only
 
-It starts its own two-node Ray cluster on 127.0.0.1 (1 CPU per node, tests/ray/cluster.py),
+It starts its own two-node Ray cluster on 127.0.0.1 (1 CPU per node, bench/local_ray.py),
 stops it at the end, and runs every sweep through `flocklab sweep` in a fresh process
 (start-up, Ray connection and Taichi initialisation included), local executor vs
 `--executor ray`, each twice: the first run warms the Taichi offline cache (and, for Ray,
@@ -35,7 +35,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from tests.ray.cluster import RAY_ENV, LocalRayCluster  # noqa: E402
+from bench.local_ray import RAY_ENV, LocalRayCluster  # noqa: E402
 
 OVERHEAD_SWEEP = {
     "name": "ray-overhead",

@@ -11,7 +11,7 @@ import pytest
 
 pytest.importorskip("ray", reason="the Ray executor tests need `pip install 'flocklab[ray]'`")
 
-from .cluster import RAY_ENV, LocalRayCluster
+from bench.local_ray import RAY_ENV, LocalRayCluster
 
 
 @pytest.fixture(scope="session")

@@ -17,7 +17,7 @@ import h5py
 import numpy as np
 import pytest
 
-from .cluster import LocalRayCluster
+from bench.local_ray import LocalRayCluster
 
 pytestmark = pytest.mark.ray
 

@@ -14,11 +14,11 @@ from typing import Any
 import httpx
 import pytest
 
+from bench.local_ray import LocalRayCluster
 from flocklab.service.serve import ServerProcess
 
 from ..service.conftest import TEST_ENV, _cleanup
 from ..service.svc_helpers import scenario, wait_for
-from .cluster import LocalRayCluster
 
 pytestmark = pytest.mark.ray
 

@@ -43,6 +43,11 @@ RADIUS_RULES = {"uniform": UNIFORM, "own": OWN, "min": MIN}
 NO_DAMPING, ABOVE_VMIN, BELOW_VMIN, EVERYWHERE = 0, 1, 2, 3
 DAMPING = {"above_vmin": ABOVE_VMIN, "below_vmin": BELOW_VMIN, "everywhere": EVERYWHERE}
 NEAREST_NONE = 1e300
+# Why a flocking step blew up, as both schedules word it.
+DIVERGED_CAUSE = (
+    "dt too large for the pair potential's stiffness, or two agents (or an agent and an "
+    "obstacle) at the same point"
+)
 
 
 @ti.func

@@ -60,6 +60,7 @@ from ...space.initial import unit_rows
 from ...space.params import Slots
 from . import observe as fo
 from . import potentials
+from .forces import DIVERGED_CAUSE
 from .navigation import fold_obstacle
 from .topology import build_edges, to_csr
 
@@ -1176,8 +1177,6 @@ class FlockingBatch(FusedBatch):
 
     def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
         """(step, quantity, cause) in the per-step path's words, or None."""
-        from .kernel import DIVERGED_CAUSE
-
         step = int(iprm[b, IP.BAD])
         if step < 0:
             return None

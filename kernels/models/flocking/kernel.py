@@ -38,6 +38,7 @@ from ...space.state import SortedState, permute_all
 from ...space.stream import ArgMin, PairwiseSum, Rows, blocks
 from . import observe as fo
 from .forces import (
+    DIVERGED_CAUSE,
     OWN,
     UNIFORM,
     P,
@@ -51,11 +52,6 @@ from .fused import FlockingBatch
 from .mission import Mission, NoMission
 from .radius import AgentRadii, UniformRadius
 from .topology import build_edges, to_csr
-
-DIVERGED_CAUSE = (
-    "dt too large for the pair potential's stiffness, or two agents (or an agent and an "
-    "obstacle) at the same point"
-)
 
 
 def _real(*shape: int) -> ti.Ndarray:

@@ -26,7 +26,7 @@ from .forces import DAMPING, NO_DAMPING, P
 from .navigation import NAV, ObstacleGrid, nav_eval_kernel, nav_parameters
 
 if TYPE_CHECKING:
-    from .kernel import Flock
+    from .parts import FlockView
 
 
 class NoMission:
@@ -43,7 +43,7 @@ class NoMission:
     def parameters(self, prm: np.ndarray) -> None:
         """No slot of its own."""
 
-    def observe(self, flock: Flock, obs: dict[str, float]) -> None:
+    def observe(self, flock: FlockView, obs: dict[str, float]) -> None:
         """Nothing to add."""
 
 
@@ -76,7 +76,7 @@ class Mission:
         self.evaluate_k(state["pos"], out, self.nav, *self.obstacles.view())
         return out
 
-    def observe(self, flock: Flock, obs: dict[str, float]) -> None:
+    def observe(self, flock: FlockView, obs: dict[str, float]) -> None:
         """sum_i V_i into Q (eq. 5); the destination distance, the share inside V_min, the
         largest V_i and the closest obstacle boundary."""
         n, dim = flock.n, flock.dim

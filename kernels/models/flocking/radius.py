@@ -25,7 +25,7 @@ from ...space.stream import PairwiseSum, Rows, blocks
 from .forces import RADIUS_RULES, UNIFORM, P, radius_kernel
 
 if TYPE_CHECKING:
-    from .kernel import Flock
+    from .parts import FlockView
 
 
 class UniformRadius:
@@ -42,14 +42,14 @@ class UniformRadius:
     def parameters(self, prm: np.ndarray) -> None:
         prm[P.R2] = 0.0 if self.radius is None else self.radius**2
 
-    def update(self, flock: Flock, step: int) -> None:
+    def update(self, flock: FlockView, step: int) -> None:
         """R never changes."""
 
-    def q_constant(self, flock: Flock) -> float:
+    def q_constant(self, flock: FlockView) -> float:
         """The constant part of Q, 1/2 sum_i sum_{j != i} V(R) (eq. 10)."""
         return 0.5 * flock.n * (flock.n - 1) * flock.p.potential.value(self.radius)
 
-    def observe(self, flock: Flock, obs: dict[str, float]) -> None:
+    def observe(self, flock: FlockView, obs: dict[str, float]) -> None:
         """Nothing beyond R itself, which the scenario states."""
 
     def extra(self) -> dict[str, Any]:
@@ -72,7 +72,7 @@ class AgentRadii:
     def parameters(self, prm: np.ndarray) -> None:
         prm[P.STUCK2], prm[P.FLOOR] = self.p.stuck_speed**2, self.p.radius_floor
 
-    def update(self, flock: Flock, step: int) -> None:
+    def update(self, flock: FlockView, step: int) -> None:
         """Eq. 4 at its cadence, on the sorted state, before the step's motion."""
         p = self.p
         if not p.adaptive_radius or step == 0 or step % p.radius_every:
@@ -85,7 +85,7 @@ class AgentRadii:
                self.counts, *flock.grid.view())
         st.swap("rad")
 
-    def q_constant(self, flock: Flock) -> float:
+    def q_constant(self, flock: FlockView) -> float:
         """1/2 sum_i sum_{j != i} V(R_ij), the saturated value of every U_ij (eq. 5):
         R_ij = R_i (own), or min(R_i, R_j), where the k-th smallest radius is the smaller
         one of its pairs with the N - 1 - k larger ones."""
@@ -102,11 +102,11 @@ class AgentRadii:
         return total.total()
 
     @staticmethod
-    def _saturated(flock: Flock, rad: np.ndarray) -> np.ndarray:
+    def _saturated(flock: FlockView, rad: np.ndarray) -> np.ndarray:
         """V(R) of paper 002's potential, a / R^2 + log R^2 + c, per radius."""
         return flock.a / rad**2 + np.log(rad**2) + flock.c
 
-    def observe(self, flock: Flock, obs: dict[str, float]) -> None:
+    def observe(self, flock: FlockView, obs: dict[str, float]) -> None:
         """radius_min, radius_mean, radius_max over the agents."""
         n = flock.n
         rows, total = Rows(flock.state["rad"]), PairwiseSum(n)
