@@ -35,7 +35,7 @@ from ... import runtime
 from ...replicas import FusedBatch, host_array
 from ...space import rng, trig
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
-from ...space.graph import union_serial
+from ...space.graph import find, link, union_serial
 from ...space.grid import max_cells_across, widen
 from ...space.params import Slots
 from .noise import cap_turn
@@ -61,6 +61,12 @@ CAUSES = (
 OBS = ("step", "polarization", "heading_spread", "leader_error", "components",
        "degree_mean", "degree_min", "degree_max", "isolated", "linked_intervals")
 N_OBS = len(OBS)
+# The batch's arrays, in the kernels' argument order.
+ARRAYS = ("aoff", "coff", "ooff", "prm", "iprm", "kseed", "pos", "ew", "theta", "ps", "cell",
+          "cstart", "cidx", "parent", "parent_u", "deg", "arc_lo", "arc_hi", "obs")
+# How a visit joins the graph's edges into the union-find forests: not at all, serially
+# (one thread a replica: the fused schedule) or atomically (the batched one).
+NO_LINKS, SERIAL, ATOMIC = 0, 1, 2
 
 
 @ti.func
@@ -69,6 +75,15 @@ def _key(kseed, step):
     host."""
     return rng._mix(kseed ^ rng._mix(ti.cast(step, ti.u32)))
 
+
+
+@ti.func
+def union_atomic(parent: ti.template(), u, v):
+    """Join the trees of u and v while other threads join other edges of the forest."""
+    ru = find(parent, u)
+    rv = find(parent, v)
+    if ru != rv:
+        link(parent, ru, rv)
 
 
 def _tracks(scenario: Scenario) -> bool:
@@ -232,12 +247,18 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
         # r2 is the strict threshold: r^2 itself for "<", the next double above it for
         # "<=" (no double lies between), so one compiled test serves both.
         w = ti.cast(d.dot(d) < r2, float)  # branch-free: 1 or 0
-        if ti.static(links):
+        if ti.static(links != NO_LINKS):
             if w > 0.0 and m > k:  # each edge once
-                if graph:
-                    union_serial(parent, cidx[k], cidx[m])
-                if track:
-                    union_serial(parent_u, cidx[k], cidx[m])
+                if ti.static(links == SERIAL):
+                    if graph:
+                        union_serial(parent, cidx[k], cidx[m])
+                    if track:
+                        union_serial(parent_u, cidx[k], cidx[m])
+                else:  # other threads join other edges of the same forests meanwhile
+                    if graph:
+                        union_atomic(parent, cidx[k], cidx[m])
+                    if track:
+                        union_atomic(parent_u, cidx[k], cidx[m])
         # (e_m, 1) for the vicsek rule, (theta_m, 0, 1) for the JLM rules (2D).
         return a + w * ti.Vector([ps[m * W + dim + c] for c in ti.static(range(dim))] + [1.0])
 
@@ -523,56 +544,121 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
             v += x[2] + e_new[1] + e_new[2]
         return ti.cast(ti.math.isnan(v) or ti.math.isinf(v), ti.i32)
 
+    # The arrays every step reads, as one compile-time tuple (its order: ARRAYS).
+    (AOFF, COFF, OOFF, PRM, IPRM, KSEED, POS, EW, THETA, PS, CELL, CSTART, CIDX, PARENT,
+     PARENT_U, DEG, ARC_LO, ARC_HI, OBS) = range(len(ARRAYS))
+
     @ti.func
-    def replica(b, s0, s1, aoff: ti.template(), coff: ti.template(), ooff: ti.template(),
-                prm: ti.template(), iprm: ti.template(), kseed: ti.template(),
-                pos: ti.template(), ew: ti.template(), theta: ti.template(),
-                ps: ti.template(), cell: ti.template(), cstart: ti.template(),
-                cidx: ti.template(), parent: ti.template(), parent_u: ti.template(),
-                deg: ti.template(), arc_lo: ti.template(), arc_hi: ti.template(),
-                obs: ti.template()):
-        """Replica b from step s0 towards s1 (serially: its steps, then its agents)."""
+    def begin(b, s, A: ti.template()):
+        """Replica b's prologue of step s: (live, grid, far). live 0: it is past its end,
+        stopped, or its swarm ran away (recorded here); grid: `build_cells`' result for
+        X(s); far: the distance from a cell's side beyond which nothing is within r."""
+        aoff, coff, prm, iprm = ti.static(A[AOFF], A[COFF], A[PRM], A[IPRM])
         a0 = aoff[b]
         n = aoff[b + 1] - a0
         c0 = coff[b]
-        cap = coff[b + 1] - c0 - 1
-        Lb = prm[b, P.L]
-        r2 = prm[b, P.R2]
-        radius = prm[b, P.RADIUS]
-        move_new = iprm[b, IP.MOVE_NEW]
-        steps = iprm[b, IP.STEPS]
-        every = iprm[b, IP.EVERY]
-        track = iprm[b, IP.TRACK] != 0
-        s = s0
-        while s < s1 and s <= steps and iprm[b, IP.BAD] < 0:
-            observing = s % every == 0 or s == steps
-            graph = observing and iprm[b, IP.WANT_COMPONENTS] != 0
-            grid = build_cells(a0, n, c0, cap, Lb, radius, pos, ew, theta, ps, cell,
-                               cstart, cidx, parent)
-            nc = ti.math.ivec3(ti.cast(grid[0], ti.i32), ti.cast(grid[1], ti.i32),
-                               ti.cast(grid[2], ti.i32))
+        live = 0
+        grid = ti.Vector.zero(float, 4 + dim)
+        far = 0.0
+        if s <= iprm[b, IP.STEPS] and iprm[b, IP.BAD] < 0:
+            radius = prm[b, P.RADIUS]
+            grid = build_cells(a0, n, c0, coff[b + 1] - c0 - 1, prm[b, P.L], radius,
+                               A[POS], A[EW], A[THETA], A[PS], A[CELL], A[CSTART], A[CIDX],
+                               A[PARENT])
             # Farther than this from a cell's side, no agent across it is within r,
             # whatever the rounding of cells and distances (float32 included).
             far = radius * 1.001 + 1e-5 * grid[3] * ti.max(grid[0], grid[1], grid[2])
             for c in ti.static(range(dim)):
                 far += 1e-5 * ti.abs(grid[4 + c])
-            if nc[0] < 0:
+            if grid[0] < 0.0:
                 iprm[b, IP.BAD] = s
                 iprm[b, IP.CAUSE] = 1
+            else:
+                live = 1
+        return live, grid, far
+
+    @ti.func
+    def slot(b, s, k, cc, grid, far, union: ti.template(), A: ti.template()):
+        """Slot k (in cell cc) of replica b at step s: its closed-neighbourhood sums, its
+        degree, and (s before the end) its agent's X(s + 1), written over X(s) in id order:
+        the visit reads only the slot-order copy, so the update stays synchronous. The
+        graph's edges are joined serially (one thread a replica) or atomically (`union`).
+        Returns 1 if the new state is not finite."""
+        aoff, coff, prm, iprm, kseed = ti.static(A[AOFF], A[COFF], A[PRM], A[IPRM],
+                                                 A[KSEED])
+        ps, cstart, cidx, parent, parent_u = ti.static(A[PS], A[CSTART], A[CIDX], A[PARENT],
+                                                       A[PARENT_U])
+        a0 = aoff[b]
+        n = aoff[b + 1] - a0
+        c0 = coff[b]
+        Lb = prm[b, P.L]
+        r2 = prm[b, P.R2]
+        steps = iprm[b, IP.STEPS]
+        observing = s % iprm[b, IP.EVERY] == 0 or s == steps
+        graph = observing and iprm[b, IP.WANT_COMPONENTS] != 0
+        tracking = iprm[b, IP.TRACK] != 0 and s < steps
+        nc = ti.math.ivec3(ti.cast(grid[0], ti.i32), ti.cast(grid[1], ti.i32),
+                           ti.cast(grid[2], ti.i32))
+        i = cidx[k]
+        lo, hi = reach(k, cc, grid, far, ps)
+        acc = ti.Vector.zero(float, dim + 1)
+        if ti.static(full):
+            if graph or tracking:  # the components and Theorem 2's forest
+                acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, union, graph, tracking, ps,
+                           cstart, cidx, parent, parent_u)
+            else:
+                acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, NO_LINKS, graph, tracking,
+                           ps, cstart, cidx, parent, parent_u)
+        else:
+            acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, NO_LINKS, graph, tracking, ps,
+                       cstart, cidx, parent, parent_u)
+        A[DEG][k] = ti.cast(acc[dim], ti.i32) - 1  # the closed set holds i
+        bad = 0
+        if s < steps:
+            bad = update(b, i, k, a0, acc, Lb, _key(kseed[b, 0], s), _key(kseed[b, 1], s),
+                         iprm[b, IP.MOVE_NEW], prm, ps, A[POS], A[EW], A[THETA])
+        return bad
+
+    @ti.func
+    def end(b, s, bad, A: ti.template()):
+        """Replica b's epilogue of step s: the observation (when due), Theorem 2's
+        intervals, and the divergence of a non-finite update."""
+        aoff, iprm = ti.static(A[AOFF], A[IPRM])
+        a0 = aoff[b]
+        n = aoff[b + 1] - a0
+        steps = iprm[b, IP.STEPS]
+        if s % iprm[b, IP.EVERY] == 0 or s == steps:
+            row = A[OOFF][b] + iprm[b, IP.NOBS]
+            iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
+            observe(b, a0, n, s, row, A[PS], A[PARENT], A[DEG], A[ARC_LO], A[ARC_HI], A[PRM],
+                    iprm, A[OBS])
+        if s < steps:
+            if ti.static(full):
+                if iprm[b, IP.TRACK] != 0:
+                    close_linked(b, a0, n, s, A[PARENT_U], iprm)
+            if bad != 0:
+                iprm[b, IP.BAD] = s
+
+    @ti.func
+    def replica(b, s0, s1, A: ti.template()):
+        """Replica b from step s0 towards s1 (serially: its steps, then its agents)."""
+        aoff, coff, cstart = ti.static(A[AOFF], A[COFF], A[CSTART])
+        a0 = aoff[b]
+        n = aoff[b + 1] - a0
+        c0 = coff[b]
+        s = s0
+        while s < s1:
+            live, grid, far = begin(b, s, A)
+            if live == 0:
                 break
-            nx = nc[0]
-            ny = nc[1]
-            tracking = track and s < steps
-            key0 = _key(kseed[b, 0], s)
-            key1 = _key(kseed[b, 1], s)
+            nx = ti.cast(grid[0], ti.i32)
+            ny = ti.cast(grid[1], ti.i32)
             bad = 0
             # Slot k's cell, followed along the slots (they are in cell order): no
             # division per agent.
             cc = ti.math.ivec3(0)
             cend = a0 + cstart[c0 + 1] if nx > 0 else a0 + n
             for k in range(a0, a0 + n):
-                # X(s + 1) is written over X(s) in id order as we go: the visit
-                # reads only the slot-order copy, so the update stays synchronous.
                 while k >= cend:
                     cc[0] += 1
                     if cc[0] == nx:
@@ -583,42 +669,17 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
                                 cc[1] = 0
                                 cc[2] += 1
                     cend = a0 + cstart[c0 + cc[0] + nx * (cc[1] + ny * cc[2]) + 1]
-                i = cidx[k]
-                lo, hi = reach(k, cc, grid, far, ps)
-                acc = ti.Vector.zero(float, dim + 1)
-                if ti.static(full):
-                    if graph or tracking:  # the components and Theorem 2's forest
-                        acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, True, graph,
-                                   tracking, ps, cstart, cidx, parent, parent_u)
-                    else:
-                        acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, False, graph,
-                                   tracking, ps, cstart, cidx, parent, parent_u)
-                else:
-                    acc = sums(k, cc, lo, hi, a0, n, c0, nc, Lb, r2, False, graph,
-                               tracking, ps, cstart, cidx, parent, parent_u)
-                deg[k] = ti.cast(acc[dim], ti.i32) - 1  # the closed set holds i
-                if s < steps:
-                    bad |= update(b, i, k, a0, acc, Lb, key0, key1, move_new, prm, ps,
-                                  pos, ew, theta)
-            if observing:
-                row = ooff[b] + iprm[b, IP.NOBS]
-                iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
-                observe(b, a0, n, s, row, ps, parent, deg, arc_lo, arc_hi, prm, iprm,
-                        obs)
-            if s < steps:
-                if ti.static(full):
-                    if track:
-                        close_linked(b, a0, n, s, parent_u, iprm)
-                if bad != 0:
-                    iprm[b, IP.BAD] = s
+                bad |= slot(b, s, k, cc, grid, far, SERIAL, A)
+            end(b, s, bad, A)
             s += 1
-
 
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, tasks: ti.i32, queue: nd, aoff: nd, coff: nd,
                 ooff: nd, prm: nd, iprm: nd, kseed: nd, pos: nd, ew: nd, theta: nd, ps: nd,
                 cell: nd, cstart: nd, cidx: nd, parent: nd, parent_u: nd, deg: nd,
                 arc_lo: nd, arc_hi: nd, obs: nd):
+        A = ti.static((aoff, coff, ooff, prm, iprm, kseed, pos, ew, theta, ps, cell, cstart,
+                       cidx, parent, parent_u, deg, arc_lo, arc_hi, obs))
         # One CPU task per worker thread; each takes the next replica from the queue
         # until none is left. Replicas tied to tasks (one per task) were dealt to the
         # threads in contiguous blocks, so a batch ordered by size (N = 400 runs, then N
@@ -627,10 +688,52 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
             if t % SPREAD == 0:
                 b = ti.atomic_add(queue[0], 1)
                 while b < aoff.shape[0] - 1:
-                    replica(b, s0, s1, aoff, coff, ooff, prm, iprm, kseed, pos, ew, theta, ps,
-                            cell, cstart, cidx, parent, parent_u, deg, arc_lo, arc_hi, obs)
+                    replica(b, s0, s1, A)
                     b = ti.atomic_add(queue[0], 1)
-    return advance
+
+    @ti.kernel
+    def step_all(s: ti.i32, rep: nd, flags: nd, grids: nd, aoff: nd, coff: nd, ooff: nd,
+                 prm: nd, iprm: nd, kseed: nd, pos: nd, ew: nd, theta: nd, ps: nd, cell: nd,
+                 cstart: nd, cidx: nd, parent: nd, parent_u: nd, deg: nd, arc_lo: nd,
+                 arc_hi: nd, obs: nd):
+        """The batched schedule's step s: every replica's prologue (one per CPU task),
+        then every replica's agents in one parallel loop (slot k of replica rep[k]), then
+        every replica's epilogue. The same functions as `advance`, in the same order for
+        each replica: the same bits."""
+        A = ti.static((aoff, coff, ooff, prm, iprm, kseed, pos, ew, theta, ps, cell, cstart,
+                       cidx, parent, parent_u, deg, arc_lo, arc_hi, obs))
+        B = aoff.shape[0] - 1
+        for t in range(B * SPREAD):
+            if t % SPREAD == 0:
+                b = t // SPREAD
+                live, grid, far = begin(b, s, A)
+                flags[b, 0] = live
+                flags[b, 1] = 0
+                for c in ti.static(range(4 + dim)):
+                    grids[b, c] = grid[c]
+                grids[b, 4 + dim] = far
+        for k in range(ps.shape[0] // W):
+            b = rep[k]
+            if flags[b, 0] != 0:
+                grid = ti.Vector([grids[b, c] for c in ti.static(range(4 + dim))])
+                nx = ti.cast(grid[0], ti.i32)
+                ny = ti.cast(grid[1], ti.i32)
+                cc = ti.math.ivec3(0)
+                if nx > 0:  # the cell of slot k, from its agent's (row-major) cell number
+                    q = cell[cidx[k]]
+                    cc[0] = q % nx
+                    cc[1] = (q // nx) % ny
+                    if ti.static(dim == 3):
+                        cc[2] = q // (nx * ny)
+                if slot(b, s, k, cc, grid, grids[b, 4 + dim], ATOMIC, A) != 0:
+                    flags[b, 1] = 1
+        for t in range(B * SPREAD):
+            if t % SPREAD == 0:
+                b = t // SPREAD
+                if flags[b, 0] != 0:
+                    end(b, s, flags[b, 1], A)
+
+    return advance, step_all
 
 
 class VicsekBatch(FusedBatch):
@@ -649,7 +752,7 @@ class VicsekBatch(FusedBatch):
         self.rule = p0.rule
         self.periodic = isinstance(first.space, PeriodicBox)
         self.dim = dim = first.dimension
-        self.kernel = advance_kernel(RULES[p0.rule], self.periodic, self.full(first), dim)
+        self.kernel = advance_kernel(RULES[p0.rule], self.periodic, self.full(first), dim)[0]
         ns = [s.n_agents for s in scenarios]
         self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
         caps = [2 * n + 16 for n in ns]  # cells per replica (the cell budget) + 1
@@ -710,7 +813,7 @@ class VicsekBatch(FusedBatch):
             arc_lo=scratch(total), arc_hi=scratch(total),
             obs=arr(np.zeros((int(self.ooff[-1]), N_OBS))),
         )
-        self._order = list(self.args)
+        assert tuple(self.args) == ARRAYS
         self.queue = host_array(np.zeros(1), np.int32)  # the next replica to take
         self.tasks = min(B, runtime.current().threads)
 
@@ -722,7 +825,7 @@ class VicsekBatch(FusedBatch):
         """Advance every replica from step s0 towards s1 (each stops at its own end)."""
         self.invalidate()
         self.queue[0] = 0
-        self.kernel(s0, s1, self.tasks, self.queue, *(self.args[k] for k in self._order))
+        self.kernel(s0, s1, self.tasks, self.queue, *(self.args[k] for k in ARRAYS))
 
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         o0 = self.ooff[b]
@@ -788,3 +891,29 @@ class VicsekBatch(FusedBatch):
         p: VicsekParams = scenario.model  # type: ignore[assignment]
         return ("vicsek", p.rule, isinstance(scenario.space, PeriodicBox),
                 cls.full(scenario), scenario.dimension)
+
+
+class VicsekBatched(VicsekBatch):
+    """M1's batched schedule: the fused batch's state, advanced one launch a step over
+    every replica's agents at once (`advance_kernel`'s `step_all`: parallel over (replica,
+    agent), as a GPU runs a sweep). Each replica runs the fused schedule's functions in
+    the same order, so its bits are the fused schedule's."""
+
+    QUEUED = False  # replicas are not handed to threads: their agents are
+
+    def __init__(self, scenarios: list[Scenario]):
+        super().__init__(scenarios)
+        self.step_kernel = advance_kernel(RULES[self.rule], self.periodic,
+                                          self.full(scenarios[0]), self.dim)[1]
+        B = len(scenarios)
+        ns = np.diff(self.aoff)
+        self.rep = host_array(np.repeat(np.arange(B), ns), np.int32)  # slot -> replica
+        self.flags = host_array(np.zeros((B, 2)), np.int32)  # live, bad (this step)
+        self.grids = host_array(np.zeros((B, 5 + self.dim)), runtime.real())  # grid, far
+
+    def advance(self, s0: int, s1: int) -> None:
+        """Every replica from step s0 towards s1, a launch a step."""
+        self.invalidate()
+        args = [self.args[k] for k in ARRAYS]
+        for s in range(s0, s1):
+            self.step_kernel(s, self.rep, self.flags, self.grids, *args)

@@ -22,7 +22,7 @@ from ...space.graph import MetricGraph, count_roots, reset_parent
 from ...space.grid import Grid, row
 from ...space.initial import initial_state
 from ...space.state import SortedState
-from .fused import VicsekBatch
+from .fused import VicsekBatch, VicsekBatched
 from .step import RULES, P, block_step_kernel, step_kernel
 
 nd = ti.types.ndarray()
@@ -70,6 +70,7 @@ def _largest_gap(lo: nd, hi: nd, nb: ti.i32) -> float:
 class VicsekKernel(ModelKernel):
     kind = "vicsek"
     fused = VicsekBatch
+    batched = VicsekBatched
 
     def __init__(self, scenario: Scenario, policy: DevicePolicy):
         super().__init__(scenario, policy)
