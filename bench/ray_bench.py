@@ -107,7 +107,8 @@ def overhead_warm(cluster: LocalRayCluster, tmp: Path) -> None:
 import json, sys, time
 from pathlib import Path
 from flocklab.schemas.sweep import load_sweep
-from flocklab.service.sweeps.executors import ExecutorConfig, make_executor
+from flocklab.service.sweeps.executors import ExecutorConfig
+from flocklab.service.sweeps.factory import make_executor
 from flocklab.service.sweeps.runner import run_sweep
 sweep = load_sweep(json.loads(Path(sys.argv[1]).read_text()))
 ex = make_executor(ExecutorConfig(kind=sys.argv[2], ray_address={cluster.address!r}))

@@ -172,7 +172,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         shutil.rmtree(out)
     from flocklab.kernels import BackendUnavailable
 
-    from .sweeps.executors import ExecutorConfig, make_executor
+    from .sweeps.executors import ExecutorConfig
+    from .sweeps.factory import make_executor
     from .sweeps.ray_executor import ClusterError
     from .sweeps.runner import SweepFolderConflict, run_sweep
 

@@ -19,3 +19,13 @@ def problem(slug: str, title: str, status: int, detail: str | None = None, **ext
         body["detail"] = detail
     body.update(extra)
     return body
+
+
+def cluster_problem(exc: Any) -> dict[str, Any]:
+    """The problem body of a ClusterError (cluster unreachable, or lost mid-job)."""
+    from flocklab.service.sweeps.ray_executor import ClusterUnavailable
+
+    slug, title = (("cluster-unavailable", "Ray cluster unavailable")
+                   if isinstance(exc, ClusterUnavailable) else
+                   ("cluster-task-lost", "Ray task lost"))
+    return problem(slug, title, 503, str(exc), ray_address=exc.address)

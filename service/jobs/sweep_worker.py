@@ -18,7 +18,7 @@ from typing import Any
 
 from .disk import disk_full_problem, is_disk_full, scrub_paths
 from .limits import Limits
-from .problems import problem
+from .problems import cluster_problem, problem
 from .results import SWEEP_FILES, checksums
 from .sweep_limits import SweepLimitError, check_sweep
 
@@ -60,10 +60,8 @@ def run_sweep_order(order: dict[str, Any], conn: Connection,
             conn.send(("progress", token, int(p.runs_done + p.runs_failed),
                        int(p.runs_total), int(p.runs_failed)))
 
-    from flocklab.service.sweeps.executors import make_executor
+    from flocklab.service.sweeps.factory import make_executor
     from flocklab.service.sweeps.ray_executor import ClusterError
-
-    from .worker import cluster_problem
 
     out_dir = Path(order["out_dir"])
     try:

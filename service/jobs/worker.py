@@ -30,7 +30,7 @@ from typing import Any
 
 from .disk import disk_full_problem, is_disk_full, scrub_paths
 from .limits import Limits, check_limits
-from .problems import problem
+from .problems import cluster_problem, problem
 from .results import checksums
 
 log = logging.getLogger("flocklab.worker")
@@ -97,7 +97,7 @@ def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dic
     if errors:
         return {"problem": problem("limit-exceeded", "Over this service's limits", 422,
                                    errors[0].msg, errors=[e.model_dump() for e in errors])}
-    from flocklab.service.sweeps.executors import make_executor
+    from flocklab.service.sweeps.factory import make_executor
     from flocklab.service.sweeps.ray_executor import ClusterError
 
     executor = make_executor(order.get("executor"))
@@ -135,16 +135,6 @@ def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dic
             return {"problem": problem("internal-error", "Internal error", 500,
                                        scrub_paths(f"{type(exc).__name__}: {exc}"))}
     return {"summary": summary, "checksums": checksums(out_dir)}
-
-
-def cluster_problem(exc: Any) -> dict[str, Any]:
-    """The problem body of a ClusterError (cluster unreachable, or lost mid-job)."""
-    from flocklab.service.sweeps.ray_executor import ClusterUnavailable
-
-    slug, title = (("cluster-unavailable", "Ray cluster unavailable")
-                   if isinstance(exc, ClusterUnavailable) else
-                   ("cluster-task-lost", "Ray task lost"))
-    return problem(slug, title, 503, str(exc), ray_address=exc.address)
 
 
 def _fit_threads(scenario: Any, allowed: int | None) -> tuple[Any, list[str]]:

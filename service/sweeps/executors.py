@@ -11,7 +11,8 @@ bits for a run: each run's result is `kernels.run` of its scenario alone, wherev
 - `RayExecutor` (ray_executor.py): batches of runs as Ray tasks on a cluster; this
   process is only the driver and never initialises Taichi.
 
-`make_executor(config)` picks one; importing this module imports neither Taichi nor Ray.
+`factory.make_executor(config)` picks one; importing this module imports neither Taichi nor
+Ray.
 """
 
 from __future__ import annotations
@@ -129,16 +130,3 @@ def run_with_artifacts(run: SweepRun, out_dir: Path, should_stop: StopFn | None
         shutil.rmtree(folder, ignore_errors=True)
         return None
     return got[0]
-
-
-def make_executor(config: ExecutorConfig | dict[str, Any] | None) -> Executor:
-    """The executor `config` names (local when None)."""
-    if config is None:
-        return LocalExecutor()
-    if isinstance(config, dict):
-        config = ExecutorConfig(**config)
-    if config.kind == "local":
-        return LocalExecutor()
-    from .ray_executor import RayExecutor
-
-    return RayExecutor(config)
