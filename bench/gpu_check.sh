@@ -17,7 +17,10 @@
 #   3. one job of each model through `flocklab serve` with backend cuda and auto: each
 #      must succeed and report the GPU as its backend;
 #   4. python -m bench.bench --backend cuda --sizes 1000000 10000000, and a table next to
-#      FLAME GPU 2's published 4.7e8 agent-steps/s at 10^6 agents on an H100.
+#      FLAME GPU 2's published 4.7e8 agent-steps/s at 10^6 agents on an H100;
+#   5. the batched schedule (Vicsek: every replica's agents in one launch a step) against
+#      the per-step one on the GPU, N = 10^3 .. 10^5 with 1, 16 and 64 replicas
+#      (python -m bench.schedules), and a batched run's bits run to run.
 # Exit status: 0 when every step passed, 1 when one failed, 2 when prerequisites miss.
 
 set -uo pipefail
@@ -292,6 +295,26 @@ if [ "$DRY" = 0 ] && [ -s "$WORK/bench.jsonl" ]; then
     say ""
     "$PY" "$WORK/table.py" "$WORK/bench.jsonl" | tee -a "$LOG"
 fi
+if [ "$SMOKE" = 1 ]; then
+    SCHED=(--backend cpu --sizes 100 --replicas 1 4 --paths per_step batched)
+else
+    SCHED=(--backend "$BACKEND" --sizes 1000 10000 100000 --replicas 1 16 64
+           --paths per_step batched)
+fi
+step "5a. python -m bench.schedules ${SCHED[*]}" 900 "$PY" -m bench.schedules "${SCHED[@]}"
+step "5b. a batched run gives the same bits twice on $BACKEND" 300 "$PY" -c "
+import numpy as np
+from flocklab import kernels
+from bench.schedules import scenario
+import bench.schedules as s
+s.BACKEND = '$BACKEND'
+scs = [scenario(2000, seed, 50) for seed in (1, 2, 3)]
+a, b = (kernels.run_batch(scs, path='batched') for _ in range(2))
+assert all(r.extra['engine_path'] == 'batched' for r in a + b)
+assert all(np.array_equal(x.observables[k], y.observables[k], equal_nan=True)
+           for x, y in zip(a, b) for k in x.observables), 'bits differ run to run'
+print('batched on', a[0].backend, ': same bits twice;', a[0].final)
+"
 
 say ""
 if [ "${#FAILED[@]}" -eq 0 ]; then

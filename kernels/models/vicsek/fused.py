@@ -906,10 +906,15 @@ class VicsekBatched(VicsekBatch):
         self.step_kernel = advance_kernel(RULES[self.rule], self.periodic,
                                           self.full(scenarios[0]), self.dim)[1]
         B = len(scenarios)
-        ns = np.diff(self.aoff)
-        self.rep = host_array(np.repeat(np.arange(B), ns), np.int32)  # slot -> replica
-        self.flags = host_array(np.zeros((B, 2)), np.int32)  # live, bad (this step)
-        self.grids = host_array(np.zeros((B, 5 + self.dim)), runtime.real())  # grid, far
+        # On the CPU the kernel runs on the host arrays in place (measured: device arrays
+        # cost more per launch there); a GPU's launches take device arrays, which a host
+        # array would be copied into and out of at every launch.
+        on = host_array if runtime.current().backend == "cpu" else _device
+        if on is _device:
+            self.args = {k: _device(v) for k, v in self.args.items()}
+        self.rep = on(np.repeat(np.arange(B), np.diff(self.aoff)), np.int32)  # slot -> b
+        self.flags = on(np.zeros((B, 2)), np.int32)  # live, bad (this step)
+        self.grids = on(np.zeros((B, 5 + self.dim)), runtime.real())  # grid, far
 
     def advance(self, s0: int, s1: int) -> None:
         """Every replica from step s0 towards s1, a launch a step."""
@@ -917,3 +922,11 @@ class VicsekBatched(VicsekBatch):
         args = [self.args[k] for k in ARRAYS]
         for s in range(s0, s1):
             self.step_kernel(s, self.rep, self.flags, self.grids, *args)
+
+
+def _device(a: np.ndarray, dtype: Any = None) -> ti.Ndarray:
+    """A device array holding `a` (as `dtype`, default its own)."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    out = ti.ndarray(ti.lang.util.to_taichi_type(a.dtype), shape=a.shape)
+    out.from_numpy(a)
+    return out
