@@ -904,5 +904,6 @@ async function start() {
   if (listTimer === null) listTimer = setInterval(refreshLists, 2000);
 }
 
-window.flocklabViewer = { state, measurePlayback, drawFrame, selectJob, selectSweep };
+window.flocklabViewer = { state, measurePlayback, drawFrame, selectJob, selectSweep,
+                          defaultPlots };
 start();
