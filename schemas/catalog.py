@@ -1,8 +1,13 @@
 """The model registry on the schema side: one parameter class per model family.
 
-A model family registers its parameter class here (one line in `schemas/__init__.py`
+A model family registers its parameter class here (one line in `schemas/models.py`
 imports the module, whose class is decorated with `@register_model`). The engine's kernel
 registry must hold exactly the same kinds (a test checks it).
+
+Each class is also the family's *model card*: everything the service, the H5MD writer,
+the renderer, the CLI and the browser viewer know of the family is a class variable (or a
+method) here, exported by `describe_models()` and served by GET /v1/models. Nothing outside
+schemas/ and kernels/ names a model kind.
 """
 
 from __future__ import annotations
@@ -11,6 +16,12 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
 from .base import Strict
+
+# What a snapshot can draw besides the agents (the card's `overlays`): "edges" the
+# interaction graph (by default at small N), "obstacles" the obstacles and destination,
+# "leaders" the virtual leader, its path and the agents' virtual leaders, "marked" agents
+# ringed with a label (JLM's leader agent).
+Overlay = Literal["edges", "obstacles", "leaders", "marked"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +57,20 @@ class ModelParams(Strict):
     # variants are narrower (checked by `check_context`).
     dimensions: ClassVar[tuple[int, ...]] = (2,)
     dimensions_note: ClassVar[str] = ""
+    # Units of (time, length) as the paper states them, SI symbols as H5MD's units module
+    # writes them; None: the model's own dimensionless unit.
+    units: ClassVar[tuple[str | None, str | None]] = (None, None)
+    # The observables a picture or the viewer plots by default, in order: a run plots
+    # those it recorded (a variant may record fewer).
+    default_plots: ClassVar[tuple[str, ...]] = ()
+    # The document that holds the family's details (the choices the papers leave open,
+    # presets, observables), a path from the repository root.
+    details: ClassVar[str] = ""
+    # What a snapshot draws besides the agents (see `Overlay`).
+    overlays: ClassVar[tuple[Overlay, ...]] = ()
+    # A constant-speed model names the parameter that is every agent's speed (the H5MD
+    # writer then tracks periodic images exactly); None: speeds vary.
+    constant_speed: ClassVar[str | None] = None
 
     @classmethod
     def observables_listing(cls) -> str:
@@ -85,6 +110,14 @@ class ModelParams(Strict):
     def check_context(self, ctx: ModelContext) -> None:
         """Cross-block checks (raise ValueError with a user-facing message)."""
 
+    def scene(self) -> dict[str, Any]:
+        """The overlay geometry these parameters alone give, by name: numbers (lists) or
+        text. For "obstacles": obstacle_points [p, ...], disc_centres [c, ...], disc_radii
+        [rho, ...], destination p; for "marked": marked [agent, ...] and marked_label.
+        What only the engine builds (a fixed graph, a leader's path) is not here: the
+        worker writes it into the run folder beside these (service/execute.py)."""
+        return {}
+
     def non_increasing(self) -> dict[str, str]:
         """Observables the paper proves never increase along this model's trajectories
         (name -> where it says so). The engine reports whether a run kept each one: a
@@ -104,7 +137,8 @@ def register_model(cls: type[ModelParams]) -> type[ModelParams]:
 
 
 def describe_models() -> list[dict[str, Any]]:
-    """The catalog: every model with its parameters, defaults, units and equations."""
+    """The catalog: every model with its parameters, defaults and equations, and its card
+    (units, default plots, details document, overlays, constant speed)."""
     out = []
     for kind, cls in MODELS.items():
         params = []
@@ -131,6 +165,11 @@ def describe_models() -> list[dict[str, Any]]:
                 "observables": None if cls.observables is None else list(cls.observables),
                 "dimensions": list(cls.dimensions),
                 "dimensions_note": cls.dimensions_note,
+                "units": {"time": cls.units[0], "length": cls.units[1]},
+                "default_plots": list(cls.default_plots),
+                "details": cls.details,
+                "overlays": list(cls.overlays),
+                "constant_speed": cls.constant_speed,
                 "parameters": params,
                 "json_schema": cls.model_json_schema(),
             }

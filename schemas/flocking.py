@@ -20,7 +20,7 @@ import pydantic
 from pydantic import Field, model_validator
 
 from .base import NonNegativeInt, PositiveInt, PositiveReal, Strict
-from .catalog import ModelContext, ModelParams, register_model
+from .catalog import ModelContext, ModelParams, Overlay, register_model
 
 # Undirected edges a fixed graph may hold (CSR: 2 x 4 bytes per edge, 400 MB at the limit).
 MAX_GRAPH_EDGES = 50_000_000
@@ -202,6 +202,9 @@ class DoubleIntegratorParams(ModelParams):
 
     state_arrays: ClassVar[tuple[str, ...]] = ("position", "velocity", "heading")
     derived_arrays: ClassVar[tuple[str, ...]] = ("degree",)
+    units: ClassVar[tuple[str | None, str | None]] = ("s", "m")  # papers 000 and 002
+    details: ClassVar[str] = "docs/models/flocking.md"
+    overlays: ClassVar[tuple[Overlay, ...]] = ("edges",)
 
     potential: PotentialSpec = Field(default=PotentialSpec(), description="Pair potential.")
     integrator: Integrator = Field(
@@ -288,6 +291,8 @@ class FlockingParams(DoubleIntegratorParams):
     paper_inclusive: ClassVar[bool] = False
     observables: ClassVar[tuple[str, ...] | None] = (*FLOCK_OBSERVABLES, "W")
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
+    default_plots: ClassVar[tuple[str, ...]] = (
+        "velocity_disagreement", "speed_mean", "components")
 
     kind: Literal["flocking"] = "flocking"
     topology: Literal["fixed", "switching"] = Field(

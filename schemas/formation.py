@@ -23,7 +23,7 @@ from typing import Annotated, ClassVar, Literal
 from pydantic import Field, model_validator
 
 from .base import Point, PositiveInt, PositiveReal, Real, Strict, Vec3
-from .catalog import ModelContext, ModelParams, register_model
+from .catalog import ModelContext, ModelParams, Overlay, register_model
 
 MAX_WAYPOINTS = 1000
 
@@ -246,6 +246,12 @@ class FormationParams(ModelParams):
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     dimensions_note: ClassVar[str] = (
         "3D: 3-vector paths and offsets, shapes cube and shell, rotations about an axis")
+    units: ClassVar[tuple[str | None, str | None]] = ("s", None)  # its lengths have none
+    # F1 reports formation_error, F2 does not: F2 runs plot the other three.
+    default_plots: ClassVar[tuple[str, ...]] = (
+        "formation_error", "velocity_mismatch_max", "min_distance", "speed_mean")
+    details: ClassVar[str] = "docs/models/formation.md"
+    overlays: ClassVar[tuple[Overlay, ...]] = ("leaders",)
 
     kind: Literal["formation"] = "formation"
     design: Literal["F1", "F2"] = Field(

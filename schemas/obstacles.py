@@ -15,13 +15,13 @@ delta the distance from r_i to the obstacle's boundary (a point: |r_i - r_o|; a 
 from __future__ import annotations
 
 import math
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import pydantic
 from pydantic import Field, StrictBool
 
 from .base import NonNegativeReal, Point, PositiveInt, PositiveReal, Strict
-from .catalog import ModelContext, register_model
+from .catalog import ModelContext, Overlay, register_model
 from .common import MAX_STEPS
 from .flocking import (
     FLOCK_OBSERVABLES,
@@ -67,6 +67,9 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
         "inside_vmin_fraction", "obstacle_distance_min")
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     dimensions_note: ClassVar[str] = "in 3D: point and sphere obstacles (discs with 3D centres)"
+    default_plots: ClassVar[tuple[str, ...]] = (
+        "velocity_disagreement_components", "destination_distance_mean", "components")
+    overlays: ClassVar[tuple[Overlay, ...]] = ("edges", "obstacles")
 
     kind: Literal["flocking_obstacles"] = "flocking_obstacles"
     potential: PotentialSpec = Field(
@@ -152,3 +155,10 @@ class ObstacleFlockingParams(DoubleIntegratorParams):
                 raise ValueError(f"model.discs[{k}] covers the destination {self.destination}")
         self._check_search(ctx)
         self._check_dt(ctx, None)
+
+    def scene(self) -> dict[str, Any]:
+        """The point obstacles, the discs (spheres in 3D) and the destination."""
+        return {"obstacle_points": [list(o) for o in self.obstacles],
+                "disc_centres": [list(d.center) for d in self.discs],
+                "disc_radii": [d.radius for d in self.discs],
+                "destination": list(self.destination)}

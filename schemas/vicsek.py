@@ -13,12 +13,12 @@ spherical cap of half-angle eta/2 around it (docs/MODELS_3D.md).
 
 from __future__ import annotations
 
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import Field, StrictBool, StrictFloat
 
 from .base import NonNegativeReal, PositiveReal, Real
-from .catalog import ModelContext, ModelParams, register_model
+from .catalog import ModelContext, ModelParams, Overlay, register_model
 
 Rule = Literal["vicsek", "average", "laplacian", "leader"]
 
@@ -42,6 +42,10 @@ class VicsekParams(ModelParams):
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     dimensions_note: ClassVar[str] = (
         "3D for rule vicsek only: average, laplacian and leader act on angles (2D)")
+    default_plots: ClassVar[tuple[str, ...]] = ("polarization", "heading_spread", "components")
+    details: ClassVar[str] = "docs/models/vicsek.md"
+    overlays: ClassVar[tuple[Overlay, ...]] = ("edges", "marked")
+    constant_speed: ClassVar[str | None] = "v0"
 
     kind: Literal["vicsek"] = "vicsek"
     rule: Rule = Field(default="vicsek", description="Heading update rule.")
@@ -101,3 +105,9 @@ class VicsekParams(ModelParams):
             raise ValueError("g applies only to rule 'laplacian'")
         if self.rule == "leader" and n < 2:
             raise ValueError("rule 'leader' needs N >= 2 (agent 0 is the leader)")
+
+    def scene(self) -> dict[str, Any]:
+        """The leader rule's agent 0 (eq. 22), ringed."""
+        if self.rule != "leader":
+            return {}
+        return {"marked": [0], "marked_label": "leader (agent 0, eq. 22)"}

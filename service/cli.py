@@ -37,7 +37,7 @@ from flocklab.schemas.sweep_presets import SWEEP_PRESETS
 from flocklab.schemas.vicsek_presets import DEFAULT_PRESET
 
 from .cli_extras import EXIT_MISSING_EXTRA, MissingExtra, require_extras, version
-from .cli_models import model_details, print_model
+from .cli_models import REFERENCES, print_model
 from .progress import ProgressBar
 
 EXIT_OK, EXIT_RUN_FAILED, EXIT_BAD_INPUT, EXIT_BACKEND = 0, 1, 2, 3
@@ -280,7 +280,7 @@ def cmd_models(args: argparse.Namespace) -> int:
     for m in catalog:
         print_model(m)
         print()
-    print("one model: flocklab models NAME; references: docs/REFERENCES.md")
+    print(f"one model: flocklab models NAME; references: {REFERENCES}")
     return EXIT_OK
 
 
@@ -290,7 +290,7 @@ def _one_model(catalog: list[dict[str, Any]], name: str, *, as_json: bool) -> in
         raise BadInput(f"unknown model {name!r}; known: "
                        f"{', '.join(m['kind'] for m in catalog)}")
     if as_json:
-        print(json.dumps({**found[0], **model_details(name)}, indent=2))
+        print(json.dumps({**found[0], "references": REFERENCES}, indent=2))
     else:
         print_model(found[0])
     return EXIT_OK

@@ -4,7 +4,10 @@ The folder holds:
   scenario.json     the canonical scenario that ran
   summary.json      status, backend, timings, final observables, convergence times
   observables.csv   the observables' time series (a header row, then one row per time)
-  trajectory.h5     recorded frames and observables in H5MD (see service/h5md.py)
+  trajectory.h5     recorded frames and observables in H5MD (see service/h5md.py), and
+                    what drawing the run needs: the model card's facts resolved for this
+                    scenario and the overlay geometry (service/engine_overlays.py), so
+                    that the renderer reads files and never imports the engine
 Everything is written into a hidden sibling folder first and renamed into place at the
 end, so the target is either complete or absent; a run that blows up still lands, with
 status "diverged" and the frames recorded before the blow-up, and so does a run stopped
@@ -71,6 +74,7 @@ def execute_to_dir(
     `stopped_status`."""
     from flocklab import kernels  # the engine: only where a simulation runs
 
+    from .engine_overlays import overlays
     from .h5md import H5MDWriter
     from .live_observables import LIVE_FILE, LiveObservables
 
@@ -90,6 +94,7 @@ def execute_to_dir(
                 on_observations=live.append, path=path,
             )
             writer.write_observables(result.observables)
+            writer.write_overlays(overlays(scenario, np.array(writer.frame_times)))
         finally:
             writer.close()
         write_observables_csv(tmp / "observables.csv", result.observables)

@@ -14,47 +14,62 @@ Layout (H5MD 1.1, https://www.nongnu.org/h5md/h5md.html):
                              (written when exact: see `image_is_exact`)
   /observables/<name>        step (T,), time (T,), value (T,)
   /parameters/flocklab       attribute `scenario`: the canonical scenario JSON
+  /parameters/flocklab/drawing   what drawing the run needs (flocklab's; see `DRAWING`):
+                             attribute `facts` (JSON: the resolved neighbourhood test,
+                             the units, default plots and overlays of the model's card),
+                             attributes for labels, and a dataset per overlay array (the
+                             parameters' obstacles; the engine's fixed graph, leader path
+                             and virtual-leader offsets: service/engine_overlays.py)
 Frames are chunked one per chunk so a frame range can be read without the whole file;
 `recording.precision` and `recording.compression` choose float32 and gzip for them.
 Units follow the H5MD units module (`/h5md/modules/units`, a `unit` attribute on `time`
-and `value`) where the model's paper states them (see `UNITS`); quantities in the
+and `value`) where the model's paper states them (its card's `units`); quantities in the
 model's own dimensionless units carry none, as the module allows.
+
+The module imports no pydantic at run time: the renderer reads the layout names below.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import h5py
 import numpy as np
 
-from flocklab.schemas import PeriodicBox, Scenario
+if TYPE_CHECKING:
+    from flocklab.schemas import Scenario
 
 VERSION = "0.1.0"
-
-# Units of (time, length) per model family, as the papers state them: papers 000 and
-# 002 use metres and seconds, paper 003 seconds (its lengths have no unit), the Vicsek
-# model neither. A missing unit means the model's own dimensionless unit.
-UNITS: dict[str, tuple[str | None, str | None]] = {
-    "flocking": ("s", "m"),
-    "flocking_obstacles": ("s", "m"),
-    "formation": ("s", None),
-    "vicsek": (None, None),
-}
+DRAWING = "parameters/flocklab/drawing"  # the group of what drawing the run needs
+# A fixed graph with more edges than this is left out of the run folder (10^6 edges are
+# 8 MB, and already a blur in any picture); `facts["graph_edges_left_out"]` counts them.
+MAX_STORED_EDGES = 1_000_000
 
 
 def image_is_exact(scenario: Scenario) -> bool:
     """Whether the periodic images can be tracked exactly from the recorded frames: an
-    agent must move less than L/2 between two frames, which holds for the constant-speed
-    Vicsek family when v0 dt every < L/2 (no other model runs in a periodic box)."""
+    agent must move less than L/2 between two frames, which holds for a constant-speed
+    model (its card names the speed parameter) when speed dt every < L/2."""
     space, model, every = scenario.space, scenario.model, scenario.recording.every
-    if not isinstance(space, PeriodicBox) or every == 0 or model.kind != "vicsek":
+    speed = type(model).constant_speed
+    if space.kind != "periodic" or every == 0 or speed is None:
         return False
-    return model.v0 * scenario.time.dt * every < space.L / 2
+    return getattr(model, speed) * scenario.time.dt * every < space.L / 2
+
+
+def drawing_facts(scenario: Scenario) -> dict[str, Any]:
+    """The card's facts about drawing this run, resolved for its scenario."""
+    card = type(scenario.model)
+    return {"inclusive": scenario.inclusive,
+            "units": {"time": card.units[0], "length": card.units[1]},
+            "default_plots": list(card.default_plots), "overlays": list(card.overlays)}
 
 
 class H5MDWriter:
-    """A `FrameSink` writing an H5MD file; `close(result)` adds the observables."""
+    """A `FrameSink` writing an H5MD file; `write_observables` adds the observables and
+    `write_overlays` the engine's overlay geometry once the run is over."""
 
     def __init__(self, path: Path, scenario: Scenario):
         self.f = h5py.File(path, "w")
@@ -63,7 +78,7 @@ class H5MDWriter:
         self.dtype = np.float32 if rec.precision == "float32" else np.float64
         self.compression = ({"compression": "gzip", "compression_opts": 4, "shuffle": True}
                             if rec.compression == "gzip" else {})
-        self.time_unit, self.length_unit = UNITS.get(scenario.model.kind, (None, None))
+        self.time_unit, self.length_unit = type(scenario.model).units
         # Periodic images: the box side, the last wrapped positions and their images.
         self.L = scenario.space.L if image_is_exact(scenario) else None
         self._last: np.ndarray | None = None
@@ -82,7 +97,7 @@ class H5MDWriter:
         box = self.swarm.create_group("box")
         dim = scenario.dimension
         box.attrs["dimension"] = dim
-        if isinstance(scenario.space, PeriodicBox):
+        if scenario.space.kind == "periodic":
             box.attrs["boundary"] = np.array([b"periodic"] * dim)
             edges = box.create_dataset("edges", data=np.array([scenario.space.L] * dim))
             self._unit(edges, self.length_unit)
@@ -90,9 +105,15 @@ class H5MDWriter:
             box.attrs["boundary"] = np.array([b"none"] * dim)
         params = self.f.create_group("parameters/flocklab")
         params.attrs["scenario"] = scenario.model_dump_json()
+        self.drawing = self.f.create_group(DRAWING)
+        self.facts = drawing_facts(scenario)
+        self.write_overlays(scenario.model.scene())
         self.frames = 0
+        self.frame_times: list[float] = []  # of the position frames, for the overlays
 
     def frame(self, step: int, time: float, arrays: dict[str, np.ndarray]) -> None:
+        if "position" in arrays:
+            self.frame_times.append(time)
         if self.L is not None and "position" in arrays:
             arrays = {**arrays, "image": self._track_image(arrays["position"])}
         for name, value in arrays.items():
@@ -152,5 +173,20 @@ class H5MDWriter:
             self._unit(g.create_dataset("time", data=observables["time"]), self.time_unit)
             g.create_dataset("value", data=value)
 
+    def write_overlays(self, overlays: dict[str, Any]) -> None:
+        """Overlay geometry into the drawing group: text as attributes, numbers as
+        datasets (a fixed graph past MAX_STORED_EDGES left out, and counted)."""
+        for name, value in overlays.items():
+            if isinstance(value, str):
+                self.drawing.attrs[name] = value
+            elif name == "graph_edges" and len(value) > MAX_STORED_EDGES:
+                self.facts["graph_edges_left_out"] = len(value)
+            else:
+                data = np.asarray(value)
+                if data.dtype.kind in "iu":  # agent ids (< MAX_AGENTS)
+                    data = data.astype(np.int32)
+                self.drawing.create_dataset(name, data=data)
+
     def close(self) -> None:
+        self.drawing.attrs["facts"] = json.dumps(self.facts)
         self.f.close()

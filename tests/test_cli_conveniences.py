@@ -10,7 +10,8 @@ from pathlib import Path
 
 import h5py
 
-from flocklab.service.cli_models import MODEL_DOCS, REFERENCES
+from flocklab.schemas import MODELS
+from flocklab.service.cli_models import REFERENCES
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,7 +32,7 @@ def test_models_name_shows_one_model_and_its_documents():
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("formation: ")
     assert "vicsek:" not in proc.stdout and "flocking:" not in proc.stdout
-    assert "details: docs/MODELS_M4.md" in proc.stdout
+    assert f"details: {MODELS['formation'].details}" in proc.stdout
     assert f"full reference: {REFERENCES}" in proc.stdout
     one = json.loads(flocklab("models", "vicsek", "--json").stdout)
     assert one["kind"] == "vicsek" and one["references"] == REFERENCES
@@ -44,7 +45,7 @@ def test_models_name_shows_one_model_and_its_documents():
 
 def test_every_document_the_code_names_exists():
     """The files `flocklab models` and the code point to are in the checkout."""
-    named = {REFERENCES, *(d for d in MODEL_DOCS.values() if d.startswith("docs/"))}
+    named = {REFERENCES, *(card.details for card in MODELS.values())}
     for text in (ROOT / "schemas").glob("*.py"):
         for word in text.read_text().split():
             if word.startswith("docs/") and word.rstrip("):.,").endswith(".md"):

@@ -1,23 +1,22 @@
-"""What a model draws besides its agents: interaction edges, obstacles and destination
-(M3), the virtual leaders, their path and the formation offsets (M4).
+"""What a model draws besides its agents, as its card names them (`overlays`): the
+interaction edges, obstacles and a destination, the virtual leader with its path and each
+agent's virtual leader, marked agents.
 
-The fixed graphs and the formation offsets are rebuilt with the engine's own pure-numpy
-helpers (`kernels.models.flocking.topology`, `kernels.models.formation`), so the picture
-shows exactly what the run used. Importing them imports Taichi's Python module but never
-initialises it; the service draws in a child process, so the API process still never
-imports the engine. The metric graph needs neither the engine nor the validated scenario, and below
-`BRUTE_FORCE_MAX` agents not even scipy (whose import costs more than the search), so a
-Vicsek or switching-graph snapshot starts in a fraction of a second.
+All of it is read from the run folder (`RunData.drawing`): the worker wrote the engine's
+own fixed graph and leader geometry there, so the picture shows exactly what the run used
+and drawing never imports the engine. The metric graph is searched here, from the
+recorded positions, and below `BRUTE_FORCE_MAX` agents without scipy (whose import costs
+more than the search), so a snapshot starts in a fraction of a second.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
-from typing import Any
 
 import numpy as np
 
+from ..h5md import MAX_STORED_EDGES
+from .errors import RenderInputError
 from .run_data import RunData
 
 BRUTE_FORCE_MAX = 4096  # agents: numpy's sort and sweep; above, scipy's k-d tree
@@ -100,18 +99,19 @@ def distance(d: np.ndarray) -> np.ndarray:
 def interaction_edges(run: RunData, pos: np.ndarray) -> np.ndarray | None:
     """The graph the model used at this frame, or None when it has none to draw.
 
-    Vicsek and switching flocking: the metric graph of `neighbours` (the paper's
-    inclusive or strict test). Fixed flocking: the run's fixed graph. Obstacles: the metric
-    graph at the initial radius R (the per-agent radii are not recorded; the summary's
-    `adaptive_radius.halvings` says whether any changed). Formation: the repulsion graph
+    A fixed graph (M2's topology fixed): the one the run wrote down. Otherwise the metric
+    graph of `neighbours` with the test in force (the paper's inclusive or strict one): for
+    M3 at the initial radius R (the per-agent radii are not recorded; the summary's
+    `adaptive_radius.halvings` says whether any changed), for M4 the repulsion graph
     |r_ij| < d.
     """
-    if run.kind == "flocking" and run.doc["model"].get("topology") == "fixed":
-        model = run.scenario.model
-        from flocklab.kernels.models.flocking.topology import build_edges
-
-        u, v = build_edges(model.graph, run.n_agents, run.scenario.seed)
-        return np.column_stack([u, v]).astype(np.int64)
+    drawing = run.drawing
+    if "graph_edges" in drawing.arrays:
+        return drawing.arrays["graph_edges"].astype(np.int64)
+    if drawing.graph_edges_left_out:
+        raise RenderInputError(
+            f"this run's fixed graph has {drawing.graph_edges_left_out} edges, more than "
+            f"a run folder keeps ({MAX_STORED_EDGES}): draw it without edges", loc="edges")
     if run.radius is None:
         return None
     return metric_edges(pos, run.radius, run.inclusive, run.box)
@@ -125,12 +125,32 @@ class Obstacles:
 
 
 def obstacles(run: RunData) -> Obstacles | None:
-    if run.kind != "flocking_obstacles":
+    d = run.drawing
+    if not d.has("obstacles", "destination"):
         return None
-    model = run.scenario.model
-    return Obstacles(np.asarray(model.obstacles, dtype=np.float64).reshape(-1, run.dimension),
-                     [(tuple(d.center), d.radius) for d in model.discs],
-                     tuple(model.destination))
+    dim, empty = run.dimension, np.zeros(0)
+    centres = np.asarray(d.arrays.get("disc_centres", empty), np.float64).reshape(-1, dim)
+    radii = np.asarray(d.arrays.get("disc_radii", empty), np.float64)
+    return Obstacles(
+        np.asarray(d.arrays.get("obstacle_points", empty), np.float64).reshape(-1, dim),
+        [(tuple(c), float(r)) for c, r in zip(centres, radii, strict=True)],
+        tuple(np.asarray(d.arrays["destination"], np.float64)))
+
+
+@dataclass
+class Marked:
+    """Agents ringed where they are, with one label (JLM's leader, agent 0)."""
+
+    agents: np.ndarray  # (M,) agent ids
+    label: str
+
+
+def marked(run: RunData) -> Marked | None:
+    d = run.drawing
+    if not d.has("marked", "marked"):
+        return None
+    return Marked(np.asarray(d.arrays["marked"], np.int64).reshape(-1),
+                  d.labels.get("marked_label", "marked"))
 
 
 @dataclass
@@ -142,36 +162,16 @@ class Leaders:
     targets: np.ndarray | None  # (N, dim) r_id(t) for F1, None for F2
 
 
-def leaders(run: RunData, t: float) -> Leaders | None:
-    if run.kind != "formation":
+def leaders(run: RunData, k: int) -> Leaders | None:
+    """The leader and (F1) the virtual leaders at frame k: r_id = p + b_i, with
+    b_i = sum_s offsets[s, i] @ offset_weights[k, s].T (the offset schedule's blend of
+    its stored formations at that time, service/engine_overlays.py)."""
+    d = run.drawing
+    if not d.has("leaders", "leader", "leader_path"):
         return None
-    path, samples, schedule = _leader_motion(run)
-    p = path.position(t)
-    targets = p[None, :] + schedule.at(t) if schedule is not None else None
-    return Leaders(p, samples, targets)
-
-
-@lru_cache(maxsize=4)
-def _leader_motion(run: RunData) -> tuple[Any, np.ndarray, Any]:
-    """The run's leader path p(t), 400 samples of it over the run, and (F1) its offset
-    schedule b_i(t): built once per run, not per movie frame (sampling an arc-length
-    spline is about half a second)."""
-    model = run.scenario.model
-    from flocklab.kernels.models.formation.path import make_path
-
-    obs, dim = run.observables, run.dimension
-    columns = [f"leader_{c}" for c in "xyz"[:dim]]
-    if all(c in obs and len(obs[c]) for c in columns):
-        start = np.array([obs[c][0] for c in columns])  # p(0) as the run had it
-    else:
-        start = run.frame(0).position.mean(axis=0)
-    path = make_path(model.path, start)
-    t_end = float(run.scenario.time.steps * run.scenario.time.dt)
-    samples = np.array([path.position(s) for s in np.linspace(0.0, t_end, 400)])
-    schedule = None
-    if model.design == "F1":
-        from flocklab.kernels.models.formation.schedule import OffsetSchedule
-
-        d = float(run.scenario.neighbours.radius)
-        schedule = OffsetSchedule(model.formation, model.schedule, run.n_agents, d, dim)
-    return path, samples, schedule
+    p = d.arrays["leader"][k]
+    targets = None
+    if "offsets" in d.arrays and "offset_weights" in d.arrays:
+        w = d.arrays["offset_weights"][k]
+        targets = p[None, :] + np.einsum("sni,sji->nj", d.arrays["offsets"], w)
+    return Leaders(p, d.arrays["leader_path"], targets)

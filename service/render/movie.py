@@ -79,5 +79,5 @@ def _movie_view(run: RunData, frames: range) -> View:
         p = run.frame(k).position
         lo, hi = np.minimum(lo, p.min(axis=0)), np.maximum(hi, p.max(axis=0))
     points = drawn_points(np.array([lo, hi]), None, geometry.obstacles(run),
-                          geometry.leaders(run, run.frame(frames[-1]).time))
+                          geometry.leaders(run, frames[-1]))
     return make_view(run, points)

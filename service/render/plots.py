@@ -11,22 +11,14 @@ from .errors import RenderInputError
 from .figure import check_size
 from .run_data import RunData, SweepData
 
-DEFAULT_OBSERVABLES = {
-    "vicsek": ["polarization", "heading_spread", "components"],
-    "flocking": ["velocity_disagreement", "speed_mean", "components"],
-    "flocking_obstacles": ["velocity_disagreement_components", "destination_distance_mean",
-                           "components"],
-    "formation": ["velocity_mismatch_max", "min_distance", "speed_mean"],
-}
 # Decaying quantities read best on a log scale.
 LOG_SCALE = ("disagreement", "error", "mismatch", "spread")
 
 
 def default_observables(run: RunData) -> list[str]:
+    """The card's default plots this run recorded, else its first three observables."""
     have = run.observables
-    names = [n for n in DEFAULT_OBSERVABLES.get(run.kind, []) if n in have]
-    if run.kind == "formation" and "formation_error" in have:
-        names.insert(0, "formation_error")
+    names = [n for n in run.drawing.default_plots if n in have]
     return names or [n for n in have if n not in ("step", "time")][:3]
 
 
@@ -67,7 +59,8 @@ def draw_observables(fig: Any, run: RunData, names: list[str] | None, width: int
             axes[0].annotate(f"{q} converged t = {tc:.4g}", (tc, 0.8),
                              xycoords=("data", "axes fraction"), fontsize=7, c="tab:red",
                              xytext=(3, 0), textcoords="offset points")
-    axes[-1].set_xlabel("time")
+    unit = run.drawing.units.get("time")
+    axes[-1].set_xlabel(f"time ({unit})" if unit else "time")
     fig.suptitle(f"{run.name}: N = {run.n_agents}", fontsize=10)
     fig.tight_layout()
     return names

@@ -2,8 +2,10 @@
 
 `scenario.json` is read as plain JSON for the facts every picture needs (model kind,
 N, box, neighbour radius): validating it with the pydantic schemas costs more start-up
-than drawing a 10^3-agent frame, so `RunData.scenario` (the validated model) is built
-only when an overlay needs the typed objects (fixed graphs, obstacles, formations).
+than drawing a 10^3-agent frame. What the model's card says about drawing it (the
+neighbourhood test in force, default plots, overlays and their geometry) the worker
+wrote into the run folder (`RunData.drawing`, service/render/drawing.py); only a folder
+written before that builds `RunData.scenario`, the validated model, to read its card.
 """
 
 from __future__ import annotations
@@ -19,15 +21,11 @@ from typing import TYPE_CHECKING, Any
 import h5py
 import numpy as np
 
+from .drawing import Drawing, load_drawing
 from .errors import RenderInputError
 
 if TYPE_CHECKING:
     from flocklab.schemas import Scenario
-
-# Each model family's neighbourhood test when the scenario leaves `neighbours.inclusive`
-# unset: the models' `paper_inclusive` (tests/render check this table against schemas).
-PAPER_INCLUSIVE = {"vicsek": True, "flocking": False, "flocking_obstacles": True,
-                   "formation": False}
 
 
 @dataclass
@@ -81,20 +79,20 @@ class RunData:
         except (ValueError, KeyError, TypeError) as exc:
             raise RenderInputError(f"{self.folder}: unreadable run files: {exc!r}") from exc
 
+    @cached_property
+    def drawing(self) -> Drawing:
+        """The card's facts for this run and its overlay geometry."""
+        return load_drawing(self)
+
     @property
     def inclusive(self) -> bool:
         """The neighbourhood test in force (`<=` when True): the scenario's, else the
         paper's."""
-        chosen = (self.doc.get("neighbours") or {}).get("inclusive")
-        if chosen is not None:
-            return bool(chosen)
-        if self.kind in PAPER_INCLUSIVE:
-            return PAPER_INCLUSIVE[self.kind]
-        return self.scenario.inclusive  # a family this table does not know yet
+        return self.drawing.inclusive
 
     @cached_property
     def scenario(self) -> Scenario:
-        """The validated scenario, for the overlays that need the typed model."""
+        """The validated scenario: an older folder's card is read through it."""
         from pydantic import ValidationError
 
         from flocklab.schemas import Scenario

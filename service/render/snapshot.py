@@ -2,8 +2,9 @@
 
 Small N: each agent an arrow along its heading (Vicsek) or its velocity (the double
 integrators and M4, length relative to the fastest agent of the frame), coloured by
-heading; the interaction edges; obstacles and the destination (M3); the virtual leader,
-its path and the formation offsets b_i to each agent's virtual leader r_id (M4); the
+heading; the overlays the model's card names (`geometry`): the interaction edges,
+obstacles and the destination (M3), the virtual leader, its path and the formation
+offsets b_i to each agent's virtual leader r_id (M4), marked agents (JLM's leader); the
 periodic box. Large N (above `FIELD_ABOVE` agents, where arrows are a blur): a density or
 local-polarization field on a grid, with the mean heading as a coarse arrow field.
 
@@ -44,7 +45,7 @@ class SnapshotOptions:
     width: int = 800
     height: int = 800
     field: Field = "auto"
-    edges: bool | None = None  # None: at N <= EDGES_MAX_AGENTS when the model has a graph
+    edges: bool | None = None  # None: at N <= EDGES_MAX_AGENTS when the card draws edges
     trails: int | None = None  # frames of path behind each agent; 0 = from the first frame
     overlays: bool = True  # obstacles, destination, leaders, path, offsets
 
@@ -105,11 +106,13 @@ class Scene:
         if self.mode != "arrows" and opts.trails is not None:
             raise RenderInputError(f"trails are drawn only with arrows (N <= {FIELD_ABOVE}, "
                                    "or field=arrows)", loc="trails")
+        drawing = run.drawing
         self.want_edges = self.mode == "arrows" and (opts.edges if opts.edges is not None else (
-            run.n_agents <= EDGES_MAX_AGENTS and run.kind != "formation"))
-        # JLM's leader rule (eq. 22): agent 0 is the leader, ringed
-        self.ring_leader = (self.mode == "arrows" and opts.overlays and run.kind == "vicsek"
-                            and run.doc["model"].get("rule") == "leader")
+            run.n_agents <= EDGES_MAX_AGENTS and "edges" in drawing.overlays
+            and not drawing.graph_edges_left_out))
+        # agents ringed where they are (JLM's leader rule, eq. 22: agent 0)
+        self.marked = (geometry.marked(run) if self.mode == "arrows" and opts.overlays
+                       else None)
         n = run.n_agents
         self.each_target = n <= TARGETS_MAX_AGENTS
         self.dot = 18 if n <= 50 else 6 if n <= 1000 else 2  # marker area, points^2
@@ -120,13 +123,13 @@ class Scene:
         run, opts, cam = self.run, self.opts, self.camera
         fr = run.frame(k)
         obst = geometry.obstacles(run) if opts.overlays else None
-        lead = geometry.leaders(run, fr.time) if opts.overlays else None
+        lead = geometry.leaders(run, k) if opts.overlays else None
         trail_pos = _trails(run, k, opts.trails) if opts.trails is not None else None
         if self.view is None:
             self.view = make_view(run, drawn_points(fr.position, trail_pos, obst, lead))
         first = not self.artists
         if first:
-            self._build(obst)
+            self._build(obst, lead)
         a = self.artists
         edges_drawn = trails_drawn = 0
         if self.mode == "arrows":
@@ -157,8 +160,8 @@ class Scene:
             a["arrows"].set_UVC(uv[:, 0], uv[:, 1])
             a["arrows"].set_color(colours)
             agents = len(a["arrows"].U)
-            if self.ring_leader:
-                a["agent0"].set_offsets(cam.screen(fr.position[:1]))
+            if self.marked is not None:
+                a["marked"].set_offsets(cam.screen(fr.position[self.marked.agents]))
         else:
             image, coarse = field_data(cam.screen(fr.position), fr.directions, self.mode,
                                        self.view.limits, cam)
@@ -202,7 +205,7 @@ class Scene:
             art.axes.draw_artist(art)
         return np.asarray(canvas.buffer_rgba())
 
-    def _build(self, obst: geometry.Obstacles | None) -> None:
+    def _build(self, obst: geometry.Obstacles | None, lead: geometry.Leaders | None) -> None:
         from matplotlib.collections import LineCollection
 
         fig, run, a, cam = self.fig, self.run, self.artists, self.camera
@@ -231,14 +234,14 @@ class Scene:
         else:
             a["image"], a["coarse"] = field_artists(ax, cax, self.mode, self.view.limits,
                                                     cam)
-        if self.ring_leader:
-            a["agent0"] = ax.scatter([], [], s=150, marker="o", fc="none", ec="k", lw=1.2,
-                                     zorder=5, label="leader (agent 0, eq. 22)")
+        if self.marked is not None:
+            a["marked"] = ax.scatter([], [], s=150, marker="o", fc="none", ec="k", lw=1.2,
+                                     zorder=5, label=self.marked.label)
             ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
         if obst is not None:
             _draw_obstacles(ax, obst, cam)
-        if self.opts.overlays and run.kind == "formation":
-            self._build_leaders(ax)
+        if lead is not None:
+            self._build_leaders(ax, lead)
         x0, x1, y0, y1 = self.view.limits
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
@@ -248,20 +251,18 @@ class Scene:
                        "paler and smaller = farther" if self.mode == "arrows"
                        else "each cell: the agents along its line of sight")
         else:
-            _plane_frame(ax, run.box)
+            _plane_frame(ax, run.box, run.drawing.units.get("length"))
         # the run on the left, drawn once; the time on the right, the one text redrawn
         # per movie frame (glyph rendering was a tenth of a frame)
         ax.set_title(f"{run.name}: N = {run.n_agents}", fontsize=10, loc="left")
         a["clock"] = ax.set_title("", fontsize=10, loc="right")
 
-    def _build_leaders(self, ax: Any) -> None:
+    def _build_leaders(self, ax: Any, lead: geometry.Leaders) -> None:
         """M4's leader path p(t), the leader now and (F1) the virtual leaders r_id with
         the offsets b_i from p(t) to them (moved frame to frame)."""
         from matplotlib.collections import LineCollection
 
         a, cam = self.artists, self.camera
-        lead = geometry.leaders(self.run, 0.0)
-        assert lead is not None
         path = cam.screen(lead.path)
         ax.plot(path[:, 0], path[:, 1], ls="--", lw=1.0, c="0.35", zorder=1,
                 label="leader path p(t)")
@@ -327,8 +328,8 @@ def make_view(run: RunData, points: np.ndarray) -> View:
     return View(lo, hi, limits, float(depth.min()), float(depth.max()))
 
 
-def _plane_frame(ax: Any, box: float | None) -> None:
-    """The periodic box and the x, y axes of a 2D picture."""
+def _plane_frame(ax: Any, box: float | None, unit: str | None) -> None:
+    """The periodic box and the x, y axes of a 2D picture (in the model's length unit)."""
     from matplotlib.ticker import MaxNLocator
 
     if box is not None:
@@ -339,8 +340,8 @@ def _plane_frame(ax: Any, box: float | None) -> None:
     # tick labels' layout was a fifth of a 10^3-agent snapshot's drawing.
     ax.xaxis.set_major_locator(MaxNLocator(5))
     ax.yaxis.set_major_locator(MaxNLocator(5))
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
+    ax.set_xlabel(f"x ({unit})" if unit else "x")
+    ax.set_ylabel(f"y ({unit})" if unit else "y")
 
 
 def _wireframe(ax: Any, view: View, cam: Camera, colour: str, depth_note: str) -> None:

@@ -166,6 +166,20 @@ def test_preset_picked_while_the_first_one_loads(browser, server):
     page.close()
 
 
+def test_default_plots_come_from_the_model_cards(browser, server):
+    """The viewer plots each family's default observables as GET /v1/models serves them
+    (the model cards), not from a table of its own."""
+    from flocklab.schemas import MODELS
+
+    w = Watched(browser, server.url + "/")
+    got = w.page.evaluate("(kinds) => kinds.map((k) => window.flocklabViewer.defaultPlots(k))",
+                          list(MODELS))
+    assert got == [list(card.default_plots) for card in MODELS.values()]
+    assert w.page.evaluate("() => window.flocklabViewer.defaultPlots('no-such-model')") == []
+    assert not w.errors, w.errors
+    w.page.close()
+
+
 def curve_pixels(page) -> int:
     """Pixels of the observables plot in its curves' blue (#1565c0, antialiased)."""
     return page.evaluate("""() => {

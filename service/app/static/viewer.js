@@ -8,17 +8,11 @@ const KEY_STORE = "flocklab-api-key";
 const HUES = 24;  // heading colours: agents are drawn in one path per hue bucket
 const BASE_FPS = 20;  // recorded frames per second at speed 1x
 const TRAJECTORY_BUDGET = 48 * 2 ** 20;  // bytes of frames fetched for playback
-const USUAL = {
-  vicsek: ["polarization", "heading_spread", "components"],
-  flocking: ["velocity_disagreement", "speed_mean", "components"],
-  flocking_obstacles: ["velocity_disagreement_components", "destination_distance_mean"],
-  formation: ["formation_error", "velocity_mismatch_max", "min_distance"],
-};
 
 const $ = (id) => document.getElementById(id);
-const state = { key: sessionStorage.getItem(KEY_STORE) || "", presets: [], selected: null,
-                selectedSweep: null, follow: null, player: null, jobs: [], sweeps: [],
-                scenario: null };
+const state = { key: sessionStorage.getItem(KEY_STORE) || "", presets: [], models: [],
+                selected: null, selectedSweep: null, follow: null, player: null, jobs: [],
+                sweeps: [], scenario: null };
 const TERMINAL = ["succeeded", "failed", "cancelled", "timed_out"];
 
 // -- HTTP ---------------------------------------------------------------------------------
@@ -42,6 +36,12 @@ async function api(path, options) {
     throw err;
   }
   return body;
+}
+
+// The observables a model's card plots by default (GET /v1/models), in order.
+function defaultPlots(kind) {
+  const card = state.models.find((m) => m.kind === kind);
+  return card ? card.default_plots : [];
 }
 
 // -- API key ------------------------------------------------------------------------------
@@ -219,8 +219,8 @@ $("submit-form").addEventListener("submit", async (ev) => {
   }
 });
 
-// A sweep of the form's scenario over one numeric field: the measure is the model's
-// first usual observable at the end of each run (the sweep plot draws it per value).
+// A sweep of the form's scenario over one numeric field: the measure is the first of the
+// model's default plots at the end of each run (the sweep plot draws it per value).
 $("submit-sweep").addEventListener("click", async () => {
   clearMarks();
   const base = readForm();
@@ -229,7 +229,11 @@ $("submit-sweep").addEventListener("click", async () => {
   const values = $("sweep-values").value.split(",").map((v) => v.trim()).filter((v) => v)
     .map((v) => (Number.isFinite(Number(v)) ? Number(v) : v));
   if (!values.length) { $("submit-error").textContent = "sweep: give the values, e.g. 0.5, 1, 2"; return; }
-  const observable = (USUAL[base.model && base.model.kind] || ["polarization"])[0];
+  const observable = defaultPlots(base.model && base.model.kind)[0];
+  if (!observable) {
+    $("submit-error").textContent = "sweep: the model's card names no observable to measure";
+    return;
+  }
   const body = { name: `${$("preset").value}-${path}`, base, replicas: Number($("sweep-replicas").value) || 1,
                  axes: [{ path, values }],
                  measure: { [observable]: { observable, reduce: "final" } } };
@@ -769,7 +773,7 @@ function clearPlot() {
 
 function drawPlot(metrics, model) {
   const obs = metrics.observables;
-  const names = (USUAL[model] || []).filter((n) => n in obs);
+  const names = defaultPlots(model).filter((n) => n in obs);
   if (!names.length) names.push(...Object.keys(obs).filter((n) => n !== "step" && n !== "time").slice(0, 3));
   const t = obs.time || [];
   const c = $("plot");
@@ -882,6 +886,7 @@ async function start() {
   showKeyState();
   try {
     state.presets = await api("/v1/presets");
+    state.models = await api("/v1/models");
   } catch (err) {
     $("list-state").textContent = err.status === 401 ? "(enter the API key)" : `(${err.message})`;
     return;
@@ -899,5 +904,6 @@ async function start() {
   if (listTimer === null) listTimer = setInterval(refreshLists, 2000);
 }
 
-window.flocklabViewer = { state, measurePlayback, drawFrame, selectJob, selectSweep };
+window.flocklabViewer = { state, measurePlayback, drawFrame, selectJob, selectSweep,
+                          defaultPlots };
 start();
