@@ -6,7 +6,7 @@ The folder holds:
   observables.csv   the observables' time series (a header row, then one row per time)
   trajectory.h5     recorded frames and observables in H5MD (see service/h5md.py), and
                     what drawing the run needs: the model card's facts resolved for this
-                    scenario and the overlay geometry (service/engine_overlays.py), so
+                    scenario and the overlay geometry (kernels/overlays.py), so
                     that the renderer reads files and never imports the engine
 Everything is written into a hidden sibling folder first and renamed into place at the
 end, so the target is either complete or absent; a run that blows up still lands, with
@@ -73,8 +73,8 @@ def execute_to_dir(
     folder is moved into place. A run that `should_stop` ended is written with status
     `stopped_status`."""
     from flocklab import kernels  # the engine: only where a simulation runs
+    from flocklab.kernels.overlays import overlays
 
-    from .engine_overlays import overlays
     from .h5md import H5MDWriter
     from .live_observables import LIVE_FILE, LiveObservables
 

@@ -19,7 +19,7 @@ Layout (H5MD 1.1, https://www.nongnu.org/h5md/h5md.html):
                              the units, default plots and overlays of the model's card),
                              attributes for labels, and a dataset per overlay array (the
                              parameters' obstacles; the engine's fixed graph, leader path
-                             and virtual-leader offsets: service/engine_overlays.py)
+                             and virtual-leader offsets: kernels/overlays.py)
 Frames are chunked one per chunk so a frame range can be read without the whole file;
 `recording.precision` and `recording.compression` choose float32 and gzip for them.
 Units follow the H5MD units module (`/h5md/modules/units`, a `unit` attribute on `time`

@@ -14,15 +14,23 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from pathlib import Path
+from typing import Any, Protocol
 
 import h5py
 import numpy as np
 
 from ..h5md import DRAWING
 
-if TYPE_CHECKING:
-    from .run_data import RunData
+
+class RunFolder(Protocol):
+    """What the drawing reads of a run folder (run_data.RunData, which builds on this)."""
+
+    trajectory_path: Path
+    scenario: Any  # the run's Scenario
+    observables: dict[str, np.ndarray]
+    dimension: int
+    frame_index: tuple[np.ndarray, np.ndarray]  # (steps, times) of the frames
 
 
 @dataclass
@@ -42,7 +50,7 @@ class Drawing:
         return overlay in self.overlays and all(n in self.arrays for n in names)
 
 
-def load_drawing(run: RunData) -> Drawing:
+def load_drawing(run: RunFolder) -> Drawing:
     """The run's drawing group, else the same facts rebuilt from an older folder."""
     if run.trajectory_path.is_file():
         with h5py.File(run.trajectory_path, "r") as f:
@@ -60,7 +68,7 @@ def _read(group: h5py.Group) -> Drawing:
                    facts["overlays"], arrays, labels, int(facts.get("graph_edges_left_out", 0)))
 
 
-def _rebuilt(run: RunData) -> Drawing:
+def _rebuilt(run: RunFolder) -> Drawing:
     """An older folder's facts from its model's card (the schemas), and its overlays from
     what it recorded."""
     model = run.scenario.model
@@ -78,7 +86,7 @@ def _rebuilt(run: RunData) -> Drawing:
                    list(card.default_plots), list(card.overlays), arrays, labels)
 
 
-def _leader_from_observables(run: RunData) -> dict[str, np.ndarray]:
+def _leader_from_observables(run: RunFolder) -> dict[str, np.ndarray]:
     """The leader's path as observed (`leader_x` ...), and its place at each frame (read
     off the observations between which the frame falls)."""
     obs = run.observables

@@ -165,7 +165,7 @@ class Leaders:
 def leaders(run: RunData, k: int) -> Leaders | None:
     """The leader and (F1) the virtual leaders at frame k: r_id = p + b_i, with
     b_i = sum_s offsets[s, i] @ offset_weights[k, s].T (the offset schedule's blend of
-    its stored formations at that time, service/engine_overlays.py)."""
+    its stored formations at that time, kernels/overlays.py)."""
     d = run.drawing
     if not d.has("leaders", "leader", "leader_path"):
         return None

@@ -1,11 +1,9 @@
 """The overlay geometry only the engine can build, for the run folder (worker side).
 
-`overlays(scenario, times)` is the kernels-level function the renderer's data needs:
-its home is kernels/ (`flocklab.kernels.overlays`, each family's part beside the helpers
-it calls), which is the lead engineer's to add; this module holds it until then, and is
-the one place in service/ that reaches into the families' packages (numpy helpers only:
-Taichi is imported, never initialised). It runs where the engine ran (a worker, the CLI),
-never in the API process nor in a drawing process.
+`overlays(scenario, times)` is what the renderer's data needs of the families' own helpers
+(numpy only: Taichi is never imported here); service/execute.py writes it into the run
+folder where the engine ran (a worker, the CLI), never in the API process nor in a drawing
+process, so service/ never reaches into a family.
 
 Returned arrays, by name (absent when the model has none):
   graph_edges     (E, 2) int64: a fixed interaction graph's edges i < j (M2, topology fixed)
@@ -38,7 +36,7 @@ def overlays(scenario: Scenario, times: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def _fixed_graph(scenario: Scenario) -> np.ndarray:
-    from flocklab.kernels.models.flocking.topology import build_edges
+    from .models.flocking.topology import build_edges
 
     assert isinstance(scenario.model, FlockingParams) and scenario.model.graph is not None
     u, v = build_edges(scenario.model.graph, scenario.n_agents, scenario.seed)
@@ -48,9 +46,9 @@ def _fixed_graph(scenario: Scenario) -> np.ndarray:
 def _leaders(scenario: Scenario, times: np.ndarray) -> dict[str, np.ndarray]:
     """The leader's path p(t) as the run built it (from the initial centroid unless the
     path gives its start) and, for F1, the offset schedule b_i(t) at the frame times."""
-    from flocklab.kernels.models.formation.path import make_path
-    from flocklab.kernels.models.formation.schedule import OffsetSchedule
-    from flocklab.kernels.space.initial import initial_state
+    from .models.formation.path import make_path
+    from .models.formation.schedule import OffsetSchedule
+    from .space.initial import initial_state
 
     model = scenario.model
     assert isinstance(model, FormationParams)
