@@ -188,8 +188,10 @@ class Sweep(Strict):
     series: list[StrictStr] = Field(default=[], description="Observables averaged over "
                                     "replicas per grid point and step (series.csv).")
     keep: Literal["table", "summaries", "all"] = Field(
-        default="summaries", description="table: only the tables; summaries: also "
-        "runs/<index>/summary.json; all: also each run's observables.csv and trajectory.h5.")
+        default="summaries", description="table: only the tables (the runs then compute only "
+        "the observables the measures and series read, unless the base names its own "
+        "recording.observables); summaries: also runs/<index>/summary.json; all: also each "
+        "run's observables.csv and trajectory.h5.")
 
     @field_validator("preset")
     @classmethod
@@ -334,7 +336,8 @@ class Sweep(Strict):
                                                  type="seed_range"))
                         break
                     runs.append(SweepRun(first + k, p, k, seed, values,
-                                         scenario.model_copy(update={"seed": seed})))
+                                         self._only_kept(scenario).model_copy(
+                                             update={"seed": seed})))
             first += n_rep
         if bad_points > MAX_REPORTED:
             errors.append(FieldError(loc="runs", type="value_error",
@@ -343,6 +346,20 @@ class Sweep(Strict):
         if errors:
             raise SweepError(errors)
         return runs
+
+    def _only_kept(self, scenario: Scenario) -> Scenario:
+        """The run computes only what the sweep keeps: with keep 'table' (runs leave
+        nothing but their measures and series) and no `recording.observables` of its own,
+        the observables its measures and series read, when the model reports them all (a
+        name it does not report is left for the runner to refuse by name)."""
+        rec = scenario.recording
+        names = list(dict.fromkeys([*(m.observable for m in self.measure.values()),
+                                    *self.series]))
+        if self.keep != "table" or rec.observables is not None or not names or not all(
+                type(scenario.model).reports(n) for n in names):
+            return scenario
+        return scenario.model_copy(update={"recording": rec.model_copy(
+            update={"observables": names})})
 
     def _point_scenario(self, doc: dict[str, Any], values: dict[str, Any], first: int,
                         n_rep: int) -> tuple[Scenario | None, list[FieldError]]:

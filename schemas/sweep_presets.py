@@ -52,7 +52,7 @@ def _vicsek_1995_base(n: int, L: float, eta: float, steps: int) -> dict[str, Any
     return {
         "name": "vicsek-1995",
         "model": {"kind": "vicsek", "rule": "vicsek", "v0": 0.03, "eta": eta,
-                  "position_update": "new_heading", "track_linked_intervals": False},
+                  "position_update": "new_heading"},
         "space": {"kind": "periodic", "L": L},
         "neighbours": {"radius": 1.0, "inclusive": True},
         "initial": {"kind": "random", "N": n},

@@ -52,6 +52,20 @@ def test_product_times_zip_times_replicas_in_point_major_order():
     assert s.total_agent_steps == 3 * 4 * (100 + 400) * 50
 
 
+@pytest.mark.parametrize("keep,own,expected", [
+    ("table", None, ["polarization", "heading_spread"]),  # only what the tables read
+    ("summaries", None, None),  # the summaries keep every observable's final value
+    ("table", ["degree_mean"], ["degree_mean"]),  # the base's own list stands
+])
+def test_runs_compute_only_what_the_sweep_keeps(keep, own, expected):
+    base = copy.deepcopy(BASE)
+    base["recording"] = {"observables": own}
+    s = load_sweep({"name": "s", "base": base, "keep": keep, "replicas": 2,
+                    "measure": {"va": {"observable": "polarization", "reduce": "mean"}},
+                    "series": ["heading_spread", "polarization"]})
+    assert all(r.scenario.recording.observables == expected for r in s.expand())
+
+
 def test_seed_rule_is_base_seed_plus_replica_and_seeds_list_replaces_it():
     runs = load_sweep(sweep(axes=[{"path": "model.eta", "values": [1, 2]}],
                             replicas=3)).expand()
