@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from .cluster import LocalRayCluster
+from bench.local_ray import LocalRayCluster
+
 from .test_ray_cli import read_journal_count, sweep_cmd, sweep_doc, wait_for_task, write
 
 pytestmark = pytest.mark.ray
