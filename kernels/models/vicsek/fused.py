@@ -33,13 +33,12 @@ from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
 from ... import runtime
 from ...replicas import FusedBatch, host_array
-from ...space import rng, trig
+from ...space import rng
 from ...space.cells import SPREAD, clear_cells, make_cell_sort
 from ...space.graph import find, link, union_serial
 from ...space.grid import max_cells_across, widen
 from ...space.params import Slots
-from .noise import cap_turn
-from .step import RULES
+from .law import RULES, agent_step
 
 nd = ti.types.ndarray()
 ALL_PAIRS_N = 48  # at or below this N every pair is tested (fewer operations than cells)
@@ -479,70 +478,28 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
             for i in range(a0, a0 + n):
                 parent_u[i] = i
 
+    law = agent_step(rule, periodic, dim, True)
+
     @ti.func
-    def update(b, i, k, a0, acc, Lb, key0, key1, move_new, prm: ti.template(),
+    def update(b, i, k, a0, acc, key0, key1, move_new, prm: ti.template(),
                ps: ti.template(), pos: ti.template(), ew: ti.template(), theta: ti.template()):
-        """Agent i (slot k) from its closed-neighbourhood sums to X(s + 1); 1 if the
-        result is not finite. key0, key1: step s's keys of noise streams 0 and 1 (made
-        once per step, not per agent)."""
-        th = ps[k * W + 2]
-        new = th
-        e_new = ti.Vector.unit(dim, 0, float)
-        if ti.static(dim == 3):
-            nrm = ti.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2])
-            if nrm > 0.0:  # as the per-step path: the x axis for a zero sum
-                for c in ti.static(range(3)):
-                    e_new[c] = acc[c] / nrm
-        elif ti.static(vicsek):
-            nrm = ti.sqrt(acc[0] * acc[0] + acc[1] * acc[1])
-            if nrm > 0.0:  # arg(0) = 0, as atan2(0, 0)
-                e_new = ti.math.vec2(acc[0], acc[1]) * (1.0 / nrm)
-        elif ti.static(rule == RULES["laplacian"]):
-            new = th - (acc[2] * th - acc[0]) / prm[b, P.G]  # eq. 18
-        else:
-            new = acc[0] / acc[2]  # eq. 1-2 (and 22 for the leader)
-        if ti.static(dim == 3):
-            if prm[b, P.ETA] > 0.0:
-                e_new = cap_turn(e_new, rng.uniform(key0, i - a0), rng.uniform(key1, i - a0),
-                                 prm[b, P.CAP])
-        elif prm[b, P.ETA] > 0.0:
-            noise = prm[b, P.ETA] * (rng.uniform(key0, i - a0) - 0.5)
-            if ti.static(vicsek):
-                cs = trig.cos_sin(noise)  # rotate e_new by the noise angle
-                cn = cs[0]
-                sn = cs[1]
-                e_new = ti.math.vec2(cn * e_new[0] - sn * e_new[1],
-                                     sn * e_new[0] + cn * e_new[1])
-            else:
-                new += noise
-        if ti.static(rule == RULES["leader"]):
-            if i == a0:
-                new = prm[b, P.THETA0]
-        if ti.static(not vicsek):
-            e_new = ti.math.vec2(ti.cos(new), ti.sin(new))
+        """Agent i (slot k) from its closed-neighbourhood sums to X(s + 1) by the law;
+        1 if the result is not finite. key0, key1: step s's keys of noise streams 0 and
+        1 (made once per step, not per agent)."""
         e = vec(0.0)  # e(theta_i(s))
         xk = vec(0.0)
         for c in ti.static(range(dim)):
             e[c] = ew[i, c]
             xk[c] = ps[k * W + c]
-        if move_new:
-            e = e_new
-        x = xk + prm[b, P.V0DT] * e
-        if ti.static(periodic):
-            for c in ti.static(range(dim)):
-                if x[c] < 0.0 or x[c] >= Lb:  # wrapped only when it left the box
-                    x[c] -= Lb * ti.floor(x[c] / Lb)
-                    if x[c] >= Lb:  # x - L floor(x / L) can round up to L itself
-                        x[c] -= Lb
+        q = ti.Vector([prm[b, P.V0DT], prm[b, P.ETA], prm[b, P.G], prm[b, P.L],
+                       prm[b, P.THETA0], prm[b, P.CAP]])
+        x, e_new, new, bad = law(ps[k * W + 2], xk, e, acc, i - a0, key0, key1, q, move_new)
         for c in ti.static(range(dim)):
             pos[i, c] = x[c]
             ew[i, c] = e_new[c]
         if ti.static(not vicsek):
             theta[i] = new
-        v = new + x[0] + x[1] + e_new[0]  # NaN if any term is NaN or infinite
-        if ti.static(dim == 3):
-            v += x[2] + e_new[1] + e_new[2]
-        return ti.cast(ti.math.isnan(v) or ti.math.isinf(v), ti.i32)
+        return bad
 
     # The arrays every step reads, as one compile-time tuple (its order: ARRAYS).
     (AOFF, COFF, OOFF, PRM, IPRM, KSEED, POS, EW, THETA, PS, CELL, CSTART, CIDX, PARENT,
@@ -615,7 +572,7 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
         A[DEG][k] = ti.cast(acc[dim], ti.i32) - 1  # the closed set holds i
         bad = 0
         if s < steps:
-            bad = update(b, i, k, a0, acc, Lb, _key(kseed[b, 0], s), _key(kseed[b, 1], s),
+            bad = update(b, i, k, a0, acc, _key(kseed[b, 0], s), _key(kseed[b, 1], s),
                          iprm[b, IP.MOVE_NEW], prm, ps, A[POS], A[EW], A[THETA])
         return bad
 

@@ -23,7 +23,8 @@ from ...space.grid import Grid, row
 from ...space.initial import initial_state
 from ...space.state import SortedState
 from .fused import VicsekBatch, VicsekBatched
-from .step import RULES, P, block_step_kernel, step_kernel
+from .law import RULES
+from .step import P, block_step_kernel, step_kernel
 
 nd = ti.types.ndarray()
 _TWO_PI = 2 * np.pi

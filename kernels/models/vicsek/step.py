@@ -22,15 +22,13 @@ from functools import cache
 
 import taichi as ti
 
-from ...space import rng, trig
 from ...space.blocks import BLOCK_LANES, lane, make_block_visitor, make_cell_pass, n_cells
 from ...space.graph import find, link
 from ...space.grid import make_visitor, row, set_row, within
 from ...space.params import Slots
-from .noise import cap_turn
+from .law import RULES, agent_step
 
 nd = ti.types.ndarray()
-RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
 # The parameter array: r^2, v0 dt, eta, g (laplacian), L (periodic box), theta_0 (leader),
 # and 1 - cos(eta/2) (3D: the spherical cap's height).
 P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0", "CAP")
@@ -38,7 +36,9 @@ P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0", "CAP")
 
 @cache
 def _finisher(rule: int, periodic: bool, move_new: bool, dim: int):
-    """The end of one agent's step, shared by the per-agent and the by-cell kernels."""
+    """The end of one agent's step, shared by the per-agent and the by-cell kernels: the
+    law (law.py) on the agent's state and sums, and the writes."""
+    law = agent_step(rule, periodic, dim, False)
 
     @ti.func
     def finish(i, xi, acc, theta: ti.template(), ew: ti.template(), ids: ti.template(),
@@ -48,63 +48,17 @@ def _finisher(rule: int, periodic: bool, move_new: bool, dim: int):
         th = 0.0
         if ti.static(rule != RULES["vicsek"]):
             th = theta[i]
-        new = th
-        e_new = ti.Vector.unit(dim, 0, float)
-        if ti.static(rule == RULES["vicsek"]):
-            nrm2 = acc[0] * acc[0] + acc[1] * acc[1]
-            if ti.static(dim == 3):
-                nrm2 += acc[2] * acc[2]
-            nrm = ti.sqrt(nrm2)
-            if nrm > 0.0:  # arg(0) = 0, as atan2(0, 0); in 3D the x axis
-                for c in ti.static(range(dim)):
-                    e_new[c] = acc[c] / nrm
-        elif ti.static(rule == RULES["laplacian"]):
-            new = th - (acc[2] * th - acc[0]) / prm[P.G]
-        else:
-            new = acc[0] / acc[2]
-        if ti.static(dim == 3):
-            if prm[P.ETA] > 0.0:
-                e_new = cap_turn(e_new, rng.uniform(key, ids[i]),
-                                 rng.uniform(key2, ids[i]), prm[P.CAP])
-        elif prm[P.ETA] > 0.0:
-            noise = prm[P.ETA] * (rng.uniform(key, ids[i]) - 0.5)
-            if ti.static(rule == RULES["vicsek"]):
-                cs = trig.cos_sin(noise)  # rotate e_new by the noise angle
-                cx = cs[0]
-                sx = cs[1]
-                ex = e_new[0]
-                ey = e_new[1]
-                e_new = ti.math.vec2(cx * ex - sx * ey, sx * ex + cx * ey)
-            else:
-                new += noise
-        if ti.static(rule == RULES["leader"]):
-            if ids[i] == 0:
-                new = prm[P.THETA0]
-        if ti.static(rule != RULES["vicsek"]):
-            e_new = ti.math.vec2(ti.cos(new), ti.sin(new))
-        e = row(ew, i, dim)  # e(theta_i(t))
-        if ti.static(move_new):
-            e = e_new
-        x = xi + prm[P.V0DT] * e
-        if ti.static(periodic):
-            L = prm[P.L]
-            # x - L floor(x / L) is x itself for x in [0, L) (x / L < 1 there, in
-            # rounding too): the division only for an agent that crossed the box.
-            for c in ti.static(range(dim)):
-                if x[c] < 0.0 or x[c] >= L:
-                    x[c] -= L * ti.floor(x[c] / L)
-                    if x[c] >= L:  # x - L floor(x / L) can round up to L itself
-                        x[c] -= L
+        q = ti.Vector([prm[P.V0DT], prm[P.ETA], prm[P.G], prm[P.L], prm[P.THETA0],
+                       prm[P.CAP]])
+        x, e_new, new, nonfinite = law(th, xi, row(ew, i, dim), acc, ids[i], key, key2, q,
+                                       ti.static(int(move_new)))
         set_row(pos_out, i, x)
         if ti.static(rule != RULES["vicsek"]):
             theta_out[i] = new
         # The unit vectors travel with the state: each heading's cos and sin (2D) are
         # computed once, here.
         set_row(ew_out, i, e_new)
-        v = new + x[0] + x[1] + e_new[0]  # NaN if any term is NaN or infinite
-        if ti.static(dim == 3):
-            v += x[2] + e_new[1] + e_new[2]
-        if ti.math.isnan(v) or ti.math.isinf(v):
+        if nonfinite:
             ti.atomic_add(bad[0], 1)
 
     return finish
