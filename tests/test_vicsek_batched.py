@@ -7,7 +7,7 @@ import pytest
 from flocklab import kernels
 from tests import test_vicsek_3d as v3
 from tests.test_vicsek import Frames, scenario
-from tests.test_vicsek_fused import MIX, same_result
+from tests.test_vicsek_fused import mix, same_result
 
 
 def both(sc):
@@ -32,13 +32,7 @@ def same_frames(a: Frames, b: Frames) -> None:
 @pytest.mark.parametrize("rule", ["vicsek", "average", "laplacian", "leader"])
 @pytest.mark.parametrize("L", [True, None], ids=["periodic", "plane"])
 def test_batched_gives_the_fused_bits_alone_and_together(taichi_cpu, rule, L):
-    specs = [dict(m, rule=rule, L=m["L"] if L else None) for m in MIX]
-    for m in specs:
-        if rule == "laplacian":
-            m["g"] = m["N"] + 1.0
-        if not L:
-            m["region"] = {"kind": "box", "low": [0, 0], "high": [m["N"] ** 0.5 / 2] * 2}
-    scenarios = [scenario(**m, every=7, track_linked_intervals=True) for m in specs]
+    scenarios = mix(rule, bool(L), every=7, track_linked_intervals=True)
     (fused, fs), (batched, bs) = both(scenarios[1])
     same_result(fused, batched)
     same_frames(fs, bs)

@@ -25,16 +25,21 @@ def same_result(a, b):
     assert a.extra.get("linked_intervals") == b.extra.get("linked_intervals")
 
 
-@pytest.mark.parametrize("rule", ["vicsek", "average", "laplacian", "leader"])
-@pytest.mark.parametrize("L", [True, None], ids=["periodic", "plane"])
-def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, rule, L):
-    specs = [dict(m, rule=rule, L=m["L"] if L else None) for m in MIX]
+def mix(rule: str, periodic: bool, **kw):
+    """MIX's scenarios under `rule`, in the periodic box or the plane."""
+    specs = [dict(m, rule=rule, L=m["L"] if periodic else None) for m in MIX]
     for m in specs:
         if rule == "laplacian":
             m["g"] = m["N"] + 1.0
-        if not L:
+        if not periodic:
             m["region"] = {"kind": "box", "low": [0, 0], "high": [m["N"] ** 0.5 / 2] * 2}
-    scenarios = [scenario(**m, every=0) for m in specs]
+    return [scenario(**m, **kw) for m in specs]
+
+
+@pytest.mark.parametrize("rule", ["vicsek", "average", "laplacian", "leader"])
+@pytest.mark.parametrize("L", [True, None], ids=["periodic", "plane"])
+def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, rule, L):
+    scenarios = mix(rule, bool(L), every=0)
     together = kernels.run_batch(scenarios)
     assert len(engine._batches(scenarios)) == 1  # one launch for all four
     for sc, res in zip(scenarios, together, strict=True):
