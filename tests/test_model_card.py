@@ -28,7 +28,7 @@ def test_every_card_is_complete(kind):
     unknown = [n for n in card.default_plots if not card.reports(n)]
     assert not unknown, f"default plots the model does not report: {unknown}"
     assert card.details.startswith("docs/") and card.details.endswith(".md")
-    assert card.overlays and set(card.overlays) <= set(get_args(Overlay))
+    assert set(card.overlays) <= set(get_args(Overlay))  # a family may draw none
     assert len(set(card.overlays)) == len(card.overlays)
     if card.constant_speed is not None:
         assert card.constant_speed in card.model_fields
