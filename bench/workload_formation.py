@@ -7,7 +7,7 @@ formation, dt = 0.01; F2 has one virtual leader and squeezes the agents towards 
 state too stiff for dt = 0.01 (measured: it diverges at N = 10^4 from t ~ 3), so dt = 0.002.
 The leader leaves the initial centroid at speed 5. Observables every 10 steps, as in the
 Vicsek workload. bench.py sets the number of steps (t = 0.3 at N = 10^6 with 30 steps: the
-swarm is still sparse; a long F2 run at 10^4 reaches the dense regime, docs/MODELS_M4.md).
+swarm is still sparse; a long F2 run at 10^4 reaches the dense regime, docs/models/formation.md).
 """
 
 from __future__ import annotations

@@ -60,7 +60,7 @@ def lean_variants(found: list[tuple[str, Scenario]]) -> list[tuple[str, Scenario
     Theorem 2's intervals and the heading spread, and without (a run recording none of
     them, as most sweeps do). For each rule and geometry in `found`, the build it lacks."""
     vicsek = [(name, sc) for name, sc in found if sc.model.kind == "vicsek"]
-    key = engine.kernel_for("vicsek").batch.batch_key
+    key = engine.kernel_for("vicsek").fused.batch_key
     seen = {key(sc) for _, sc in vicsek}
     out = []
     for name, sc in vicsek:

@@ -184,7 +184,7 @@ class GraphSpec(Strict):
 
 
 HIST_BINS = 16  # valency_hist_0 .. valency_hist_15, then valency_hist_16plus
-# The observables of M2 and M3 (docs/MODELS_M2_M3.md); each run reports those of its
+# The observables of M2 and M3 (docs/models/flocking.md); each run reports those of its
 # variant: W on a fixed graph, Q and Q_reduced on a switching one; valency_<i> (each
 # agent's) when N <= valency_per_agent_max, the histogram otherwise; the z components in
 # 3D. lambda2, an eigensolve on the host at every observation, is the costly one: a run

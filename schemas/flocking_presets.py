@@ -1,6 +1,6 @@
 """Named M2 and M3 runs: the simulations of papers 000 and 002.
 
-Parameters the papers leave out are chosen here and documented in docs/MODELS_M2_M3.md:
+Parameters the papers leave out are chosen here and documented in docs/models/flocking.md:
 paper 000 gives N, the initial box and speeds, R and the duration but not the potential's
 d, the graph's density, dt or the seed; paper 002 gives N = 5, the destination and the
 shape of the obstacle only.

@@ -234,7 +234,7 @@ class FormationParams(ModelParams):
     )
     paper_inclusive: ClassVar[bool] = False
     state_arrays: ClassVar[tuple[str, ...]] = ("position", "velocity")
-    # Each design reports its own (docs/MODELS_M4.md): F1 formation_error .. V1, F2 V2 ..
+    # Each design reports its own (docs/models/formation.md): F1 formation_error .. V1, F2 V2 ..
     # components; leader_z and centroid_z in 3D. D3 is the costly one in 3D (a linear
     # program per component and observation): a scenario that does not name it skips it.
     observables: ClassVar[tuple[str, ...] | None] = (
@@ -279,7 +279,7 @@ class FormationParams(ModelParams):
         default=1024,
         description="Cap on the pair work per agent: when the densest neighbour cell (side "
         "d) would make an agent visit more than this many candidates (9 x its count), an "
-        "Euler step coarse-grains far pairs by sub-cell (docs/MODELS_M4.md); null: always "
+        "Euler step coarse-grains far pairs by sub-cell (docs/models/formation.md); null: always "
         "exact. Runs with N <= 113 (the paper's: N <= 100) are always exact.",
     )
     collision_distance: PositiveReal | None = Field(

@@ -1,6 +1,6 @@
 """Named M4 runs: the three simulations of Xi–Abed (paper 003, Section 4), and a 3D F1 run.
 
-Every parameter the paper leaves out is chosen here and listed in docs/MODELS_M4.md:
+Every parameter the paper leaves out is chosen here and listed in docs/models/formation.md:
 initial area [0, 50]^2, the gains k and k_g, the formations, the leader's timing, dt.
 """
 

@@ -23,7 +23,7 @@ def reduce_run(m: Measure, observables: dict[str, np.ndarray], tolerance: float)
     if len(v) == 0:
         return None
     if m.reduce == "converge_time":
-        from flocklab.kernels.engine import time_to_converge  # the engine's own definition
+        from flocklab.kernels.checks import time_to_converge  # the engine's own definition
 
         tol = m.tolerance if m.tolerance is not None else tolerance
         return time_to_converge(observables["time"][window], v, tol)
