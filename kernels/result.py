@@ -42,7 +42,7 @@ class RunResult:
         return self.n_agents * self.steps / self.wall_seconds if self.wall_seconds > 0 else 0.0
 
     def summary(self) -> dict[str, Any]:
-        """The JSON-ready summary (documented in the README, written as summary.json)."""
+        """The JSON-ready summary (documented in docs/OUTPUTS.md, written as summary.json)."""
         return {
             "status": self.status,
             "backend": self.backend,

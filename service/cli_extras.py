@@ -12,7 +12,7 @@ import importlib.metadata
 import importlib.util
 
 # Exit code of a command whose extra is not installed (documented in the module
-# docstring of service/cli.py and in the README's exit codes).
+# docstring of service/cli.py and in docs/CLI.md's exit codes).
 EXIT_MISSING_EXTRA = 4
 
 # The import names each extra brings, as the commands import them.
