@@ -17,6 +17,7 @@ import numpy as np
 
 from flocklab.schemas import Problem, Scenario
 from flocklab.schemas.status import JobView
+from flocklab.schemas.version import version
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 TERMINAL = frozenset({"succeeded", "failed", "cancelled", "timed_out"})
@@ -24,7 +25,8 @@ LONG_POLL_SECONDS = 10.0  # one GET ?wait= waits at most this long
 
 
 def headers(api_key: str | None) -> dict[str, str]:
-    h = {"Accept": "application/json, application/problem+json"}
+    h = {"Accept": "application/json, application/problem+json",
+         "User-Agent": f"flocklab-client/{version()}"}
     if api_key:
         h["Authorization"] = f"Bearer {api_key}"
     return h

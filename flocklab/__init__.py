@@ -18,12 +18,7 @@ from typing import Any
 
 def __getattr__(name: str) -> Any:
     if name == "__version__":  # read on first use: importlib.metadata costs ~70 ms
-        from importlib import metadata
-
-        try:
-            return metadata.version("flocklab")
-        except metadata.PackageNotFoundError:  # a source tree never installed
-            return "0+unknown"
+        return importlib.import_module("flocklab.schemas.version").version()
     clients = importlib.import_module("flocklab.clients")
     if name in clients.__all__:
         return getattr(clients, name)

@@ -50,7 +50,7 @@ def require_extras(command: str) -> None:
 
 
 def version() -> str:
-    """The installed distribution's version."""
-    import flocklab
+    """The installed distribution's version (flocklab.schemas.version)."""
+    from flocklab.schemas.version import version as installed
 
-    return flocklab.__version__
+    return installed()

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from flocklab.schemas import Scenario
+from flocklab.schemas.version import version
 
 if TYPE_CHECKING:
     from flocklab.kernels import RunResult
@@ -48,7 +49,7 @@ def run_summary(scenario: Scenario, result: RunResult, *, frames: int,
                 files: list[str]) -> dict[str, Any]:
     """The JSON-ready summary.json of one run (a job's, or a sweep run's)."""
     return {
-        "flocklab_version": "0.1.0",
+        "flocklab_version": version(),
         "scenario_name": scenario.name,
         "model": scenario.model.kind,
         **result.summary(),

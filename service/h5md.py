@@ -41,7 +41,6 @@ import numpy as np
 if TYPE_CHECKING:
     from flocklab.schemas import Scenario
 
-VERSION = "0.1.0"
 DRAWING = "parameters/flocklab/drawing"  # the group of what drawing the run needs
 # A fixed graph with more edges than this is left out of the run folder (10^6 edges are
 # 8 MB, and already a blur in any picture); `facts["graph_edges_left_out"]` counts them.
@@ -88,7 +87,10 @@ class H5MDWriter:
         h5.create_group("author").attrs["name"] = "flocklab user"
         creator = h5.create_group("creator")
         creator.attrs["name"] = "flocklab"
-        creator.attrs["version"] = VERSION
+        # Imported here: the module itself stays free of pydantic (the renderer reads it).
+        from flocklab.schemas.version import version
+
+        creator.attrs["version"] = version()
         if self.time_unit or self.length_unit:
             units = h5.create_group("modules/units")
             units.attrs["version"] = np.array([1, 0], dtype=np.int32)

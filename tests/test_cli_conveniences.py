@@ -12,6 +12,7 @@ import h5py
 
 from flocklab.schemas import MODELS
 from flocklab.service.cli_models import REFERENCES
+from tests.project_version import VERSION
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -24,7 +25,7 @@ def flocklab(*args, stdin=None):
 def test_version():
     proc = flocklab("--version")
     assert proc.returncode == 0
-    assert proc.stdout.strip() == "flocklab 0.1.0"
+    assert proc.stdout.strip() == f"flocklab {VERSION}"
 
 
 def test_models_name_shows_one_model_and_its_documents():

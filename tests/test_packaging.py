@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.project_version import VERSION
+
 ROOT = Path(__file__).resolve().parents[1]
 PARTS = ("kernels", "schemas", "service", "clients")
 SKIP = {".venv", ".ci-venv", ".git", "build", "dist", "node_modules"}
@@ -43,7 +45,7 @@ def test_import_flocklab_gives_the_client_and_loads_nothing_heavy():
             "any(m.startswith(('pydantic', 'httpx', 'flocklab.clients')) for m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd="/").stdout.split()
-    assert out == ["flocklab.clients.sync", "0.1.0", "True"]
+    assert out == ["flocklab.clients.sync", VERSION, "True"]
     lazy = subprocess.run([sys.executable, "-c", "import sys, flocklab; print(sorted("
                            "m for m in sys.modules if m.startswith(('flocklab.', 'pydantic'))))"],
                           capture_output=True, text=True, check=True, cwd="/").stdout
@@ -60,7 +62,7 @@ def test_wheel_and_sdist_install_beside_the_pypi_kernels(tmp_path: Path):
     with zipfile.ZipFile(wheel) as z:
         tops = {n.split("/")[0] for n in z.namelist()}
         meta = z.read(next(n for n in z.namelist() if n.endswith("dist-info/METADATA")))
-    assert tops == {"flocklab", "flocklab-0.1.0.dist-info"}, tops
+    assert tops == {"flocklab", f"flocklab-{VERSION}.dist-info"}, tops
     with zipfile.ZipFile(wheel) as z:
         names = set(z.namelist())
     assert {"flocklab/kernels/space/grid.py", "flocklab/service/app/static/index.html",
@@ -81,7 +83,7 @@ def test_wheel_and_sdist_install_beside_the_pypi_kernels(tmp_path: Path):
             "flocklab.Client('http://127.0.0.1:1').base_url)")
     out = subprocess.run([py, "-c", code], capture_output=True, text=True, check=True,
                          cwd=tmp_path, timeout=120).stdout.split()
-    assert out == ["kernels/__init__.py", "0.1.0", "http://127.0.0.1:1"], out
+    assert out == ["kernels/__init__.py", VERSION, "http://127.0.0.1:1"], out
     cli = subprocess.run([str(env / "bin" / "flocklab"), "--version"], capture_output=True,
                          text=True, timeout=60)
-    assert cli.returncode == 0 and cli.stdout.strip() == "flocklab 0.1.0", cli.stderr
+    assert cli.returncode == 0 and cli.stdout.strip() == f"flocklab {VERSION}", cli.stderr

@@ -17,6 +17,7 @@ from starlette.concurrency import run_in_threadpool
 
 from flocklab.schemas import Problem, Scenario
 from flocklab.schemas.sweep import Sweep
+from flocklab.schemas.version import version
 from flocklab.service.jobs import JobRuntime
 
 from .admission import AdmissionMiddleware
@@ -30,7 +31,6 @@ from .sweep_wire import SweepRequest
 from .viewer import install as install_viewer
 from .wire import JobRequest
 
-VERSION = "0.1.0"
 DESCRIPTION = """\
 Run published multi-agent flocking models as jobs.
 
@@ -60,7 +60,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # With an API key, the API description needs it too and the browser UIs (which
     # cannot send it) are off.
     public_docs = settings.api_key is None
-    app = FastAPI(title="flocklab", version=VERSION, description=DESCRIPTION,
+    app = FastAPI(title="flocklab", version=version(), description=DESCRIPTION,
                   lifespan=lifespan, openapi_url="/openapi.json" if public_docs else None,
                   docs_url="/docs" if public_docs else None,
                   redoc_url="/redoc" if public_docs else None, openapi_tags=[

@@ -34,6 +34,7 @@ from pydantic import ValidationError
 
 from flocklab.schemas import FieldError, Scenario
 from flocklab.schemas.sweep import Sweep, SweepError, SweepRun
+from flocklab.schemas.version import version
 
 from ..execute import run_summary
 from .executors import Executor, LocalExecutor
@@ -246,7 +247,7 @@ def _create_folder(out_dir: Path, sweep: Sweep, runs: list[SweepRun]) -> None:
     """The folder and its sweep.json: the canonical sweep and every run."""
     out_dir.mkdir(parents=True, exist_ok=True)
     doc = {
-        "flocklab_version": "0.1.0",
+        "flocklab_version": version(),
         "sweep": sweep.model_dump(mode="json"),
         "base": sweep.base_scenario.model_dump(mode="json"),
         "n_points": sweep.n_points,
