@@ -55,7 +55,24 @@ REPLICAS_PATH = "replicas"
 RESERVED_COLUMNS = frozenset({"run", "point", "replica", "seed", "status", "step", "time"})
 _MEASURE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
-Reduce = Literal["mean", "std", "final", "min", "max", "converge_time"]
+Reduce = Literal["mean", "std", "final", "min", "max", "converge_time",
+                 "moments", "binder", "susceptibility", "tau_int"]
+# The columns a measure named m adds to runs.csv (its suffixes after m; one column, m
+# itself, for the other reduces) and the quantities of table.csv (each q gives q_mean,
+# q_sd, q_sem, q_count, and q_err where the runs carry an error). See docs/SWEEPS.md,
+# "Transition statistics".
+RUN_SUFFIXES: dict[str, tuple[str, ...]] = {
+    "moments": ("_m1", "_m1_err", "_m2", "_m2_err", "_m4", "_m4_err", "_tau"),
+    "binder": ("", "_err", "_m2", "_m4"),
+    "susceptibility": ("", "_err", "_m1", "_m2"),
+    "tau_int": ("", "_err", "_window"),
+}
+TABLE_QUANTITIES: dict[str, tuple[tuple[str, bool], ...]] = {  # (suffix, has an error)
+    "moments": (("_m1", True), ("_m2", True), ("_m4", True), ("_tau", False)),
+    "binder": (("", True),),
+    "susceptibility": (("", True),),
+    "tau_int": (("", True),),
+}
 
 
 class SweepError(ValueError):
@@ -134,7 +151,11 @@ class Measure(Strict):
     reduce: Reduce = Field(description="mean / std (population std over the window) / "
                            "final (last value in the window) / min / max / converge_time "
                            "(first time after which the value stays below `tolerance` to the "
-                           "window's end; empty when it never does).")
+                           "window's end; empty when it never does) / moments (<x>, <x^2>, "
+                           "<x^4> with tau_int-corrected errors) / binder (G = 1 - <x^4> / "
+                           "(3 <x^2>^2)) / susceptibility (chi = N (<x^2> - <x>^2)) / "
+                           "tau_int (Sokal's integrated autocorrelation time, in "
+                           "observation intervals). See docs/SWEEPS.md.")
     from_step: NonNegativeInt | None = Field(default=None, description="First step "
                                              "included (default: 0).")
     to_step: NonNegativeInt | None = Field(default=None, description="Last step included "
@@ -150,6 +171,15 @@ class Measure(Strict):
         if self.tolerance is not None and self.reduce != "converge_time":
             raise ValueError("tolerance applies to reduce 'converge_time' only")
         return self
+
+    def run_columns(self, name: str) -> list[str]:
+        """This measure's columns of runs.csv (and keys of a run's journal record)."""
+        return [name + s for s in RUN_SUFFIXES.get(self.reduce, ("",))]
+
+    def table_quantities(self, name: str) -> list[tuple[str, bool]]:
+        """(quantity, has an error) per quantity of table.csv: q_mean, q_sd, q_sem,
+        [q_err,] q_count."""
+        return [(name + s, e) for s, e in TABLE_QUANTITIES.get(self.reduce, (("", False),))]
 
 
 @dataclass(frozen=True)
@@ -207,6 +237,16 @@ class Sweep(Strict):
             if not _MEASURE_NAME.fullmatch(name) or name in RESERVED_COLUMNS:
                 raise ValueError(f"measure name {name!r} must be an identifier other than "
                                  f"{', '.join(sorted(RESERVED_COLUMNS))}")
+        owners: dict[tuple[str, str], str] = {}  # (file, column) -> the measure writing it
+        for name, m in v.items():
+            table = [q + s for q, e in m.table_quantities(name)
+                     for s in ("_mean", "_sd", "_sem", "_count", *(("_err",) if e else ()))]
+            for key in [*(("runs.csv", c) for c in m.run_columns(name)),
+                        *(("table.csv", c) for c in table)]:
+                if key in owners:
+                    raise ValueError(f"measures {owners[key]!r} and {name!r} both write the "
+                                     f"column {key[1]!r} of {key[0]}: rename one")
+                owners[key] = name
         return v
 
     @field_validator("series")

@@ -6,7 +6,8 @@ The folder:
   runs.jsonl          the journal: one line per finished run (see journal.py)
   runs.csv, table.csv, series.csv   the tables (see tables.py), rewritten atomically
                       every TABLE_INTERVAL s or more and at the end (also on cancel)
-  runs/<index>/summary.json         keep = summaries (the default) or all
+  runs/<index>/summary.json         keep = summaries (the default) or all; for
+                      summaries it holds the run's measures (its runs.csv columns)
   runs/<index>/{scenario.json, observables.csv, trajectory.h5}   keep = all
 Running the same sweep into the same folder again resumes it: runs found in the journal
 are not redone. A folder holding a different sweep is refused (SweepFolderConflict).
@@ -150,6 +151,7 @@ class _State:
             summary["sweep_run"] = {"run": run.index, "point": run.point,
                                     "replica": run.replica, "seed": run.seed,
                                     "values": run.values}
+            summary["measures"] = record["measures"]  # this run's columns of runs.csv
             folder = self.out_dir / "runs" / str(run.index)
             folder.mkdir(parents=True, exist_ok=True)
             atomic_write(folder / "summary.json",
@@ -176,8 +178,11 @@ def _record(sweep: Sweep, run: SweepRun, result: RunResult) -> dict[str, Any]:
     if completed:
         _require_observables(sweep, run, obs)
     tol = run.scenario.convergence.tolerance
-    measures = {name: _finite(reduce_run(m, obs, tol)) if completed else None
-                for name, m in sweep.measure.items()}
+    measures: dict[str, float | None] = {}
+    for name, m in sweep.measure.items():
+        cols = reduce_run(name, m, obs, tol, run.scenario.n_agents) if completed \
+            else dict.fromkeys(m.run_columns(name))
+        measures.update({k: _finite(v) for k, v in cols.items()})
     series: dict[str, list[Any]] = {}
     if completed and sweep.series:
         series = {"step": [int(s) for s in obs["step"]], "time": [float(t) for t in obs["time"]]}
