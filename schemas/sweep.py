@@ -217,6 +217,10 @@ class Sweep(Strict):
                                         "observable; a column of runs.csv and table.csv.")
     series: list[StrictStr] = Field(default=[], description="Observables averaged over "
                                     "replicas per grid point and step (series.csv).")
+    labels: dict[StrictStr, Annotated[StrictStr, Field(min_length=1, max_length=40)]] = Field(
+        default={}, description="Symbols for pictures (`flocklab render`): an axis path or "
+        "a table quantity (a measure's name; for moments <m>_m1, <m>_m2, <m>_m4, <m>_tau) "
+        "-> its label, e.g. {\"model.eta\": \"η\", \"space.L\": \"L\"}.")
     keep: Literal["table", "summaries", "all"] = Field(
         default="summaries", description="table: only the tables (the runs then compute only "
         "the observables the measures and series read, unless the base names its own "
@@ -255,6 +259,17 @@ class Sweep(Strict):
         if len(set(v)) != len(v):
             raise ValueError("series lists an observable twice")
         return v
+
+    @model_validator(mode="after")
+    def _label_keys(self) -> Sweep:
+        known = {a.path for a in self.axis_entries()} | {
+            q for n, m in self.measure.items() for q, _ in m.table_quantities(n)}
+        unknown = sorted(set(self.labels) - known)
+        if unknown:
+            raise ValueError(f"labels: {', '.join(map(repr, unknown))} is neither an axis "
+                             f"path nor a measure's quantity (known: "
+                             f"{', '.join(sorted(known)) or 'none'})")
+        return self
 
     @model_validator(mode="after")
     def _structure(self) -> Sweep:

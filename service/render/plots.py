@@ -69,7 +69,9 @@ def draw_observables(fig: Any, run: RunData, names: list[str] | None, width: int
 def draw_sweep(fig: Any, sweep: SweepData, names: list[str] | None, width: int,
                height: int) -> list[str]:
     """Each measure against the first axis, one curve per value of the second axis, error
-    bars from the replicas' standard error (else their standard deviation)."""
+    bars from the replicas' standard error (else their standard deviation; where a point
+    has one replica, its tau_int-based error `_err` when the table has one), labelled
+    with the sweep's symbols (`SweepData.label`)."""
     check_size(width, height)
     measures = names or sweep.measures
     unknown = [m for m in measures if f"{m}_mean" not in sweep.columns]
@@ -85,19 +87,23 @@ def draw_sweep(fig: Any, sweep: SweepData, names: list[str] | None, width: int,
     for ax, m in zip(axes, measures, strict=True):
         mean = sweep.columns[f"{m}_mean"]
         err = sweep.columns.get(f"{m}_sem", sweep.columns.get(f"{m}_sd"))
+        if err is not None and f"{m}_err" in sweep.columns:
+            err = np.where(np.isfinite(err), err, sweep.columns[f"{m}_err"])
         for g in groups:
             rows = np.array([k == g for k in keys])
             order = np.argsort(x[rows], kind="stable")
             yerr = None if err is None else np.nan_to_num(err[rows][order])
             ax.errorbar(x[rows][order], mean[rows][order], yerr=yerr, marker="o", ms=4,
-                        capsize=3, lw=1.2, label=f"{group} = {g}" if group else None)
-        ax.set_ylabel(m, fontsize=8)
+                        capsize=3, lw=1.2,
+                        label=f"{sweep.label(group)} = {g}" if group else None)
+        symbol = sweep.label(m)  # a symbol (G, χ) reads at the size of the tick labels
+        ax.set_ylabel(symbol, fontsize=11 if len(symbol) <= 8 else 8)
         ax.grid(alpha=0.3)
         if group is not None:
             ax.legend(fontsize=7)
     if ticks is not None:
         axes[-1].set_xticks(range(len(ticks)), ticks)
-    axes[-1].set_xlabel(x_axis)
+    axes[-1].set_xlabel(sweep.label(x_axis))
     bars = "sem" if any(f"{m}_sem" in sweep.columns for m in measures) else "sd"
     fig.suptitle(f"{sweep.name}: mean ± {bars} over replicas", fontsize=10)
     fig.tight_layout()

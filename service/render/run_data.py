@@ -234,6 +234,24 @@ class SweepData:
     def measures(self) -> list[str]:
         return [c.removesuffix("_mean") for c in self.columns if c.endswith("_mean")]
 
+    def label(self, name: str) -> str:
+        """The symbol of an axis path or a table quantity: the sweep's `labels`, else the
+        literature's for a binder (G), susceptibility (chi) or tau_int measure, else the
+        name itself."""
+        sweep = self.spec.get("sweep")
+        sweep = sweep if isinstance(sweep, dict) else {}
+        labels = sweep.get("labels")
+        if isinstance(labels, dict) and isinstance(labels.get(name), str):
+            return labels[name]
+        measure = (sweep.get("measure") or {}).get(name) if isinstance(
+            sweep.get("measure"), dict) else None
+        reduce = measure.get("reduce") if isinstance(measure, dict) else None
+        return REDUCE_SYMBOLS.get(reduce, name) if isinstance(reduce, str) else name
+
+
+# The usual symbols of the transition statistics (docs/SWEEPS.md).
+REDUCE_SYMBOLS = {"binder": "G", "susceptibility": "χ", "tau_int": "τ_int"}
+
 
 def is_sweep_dir(folder: Path) -> bool:
     return (Path(folder) / "table.csv").is_file() and (Path(folder) / "sweep.json").is_file()
