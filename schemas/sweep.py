@@ -35,6 +35,7 @@ from pydantic import (
     StrictStr,
     Tag,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -44,6 +45,7 @@ from .paths import PathError, check_path, merge, set_path, split_path
 from .presets import PRESETS
 from .problems import FieldError, field_errors
 from .scenario import Scenario
+from .sweep_design import Analysis, Design, design_problems
 
 # The most runs one sweep may expand to (the CLI's only limit; a service sets its own).
 MAX_RUNS = 100_000
@@ -217,6 +219,12 @@ class Sweep(Strict):
                                         "observable; a column of runs.csv and table.csv.")
     series: list[StrictStr] = Field(default=[], description="Observables averaged over "
                                     "replicas per grid point and step (series.csv).")
+    design: Design | None = Field(default=None, description="A sampling design (lhs, "
+                                  "sobol, halton, morris) over `bounds`: its points are grid "
+                                  "points (times the axes' grid, when both are given).")
+    analysis: Analysis | None = Field(default=None, description="A sensitivity analysis "
+                                      "(sobol, morris) of one measure over the design: "
+                                      "sensitivity.csv.")
     labels: dict[StrictStr, Annotated[StrictStr, Field(min_length=1, max_length=40)]] = Field(
         default={}, description="Symbols for pictures (`flocklab render`): an axis path or "
         "a table quantity (a measure's name; for moments <m>_m1, <m>_m2, <m>_m4, <m>_tau) "
@@ -258,6 +266,26 @@ class Sweep(Strict):
     def _unique_series(cls, v: list[str]) -> list[str]:
         if len(set(v)) != len(v):
             raise ValueError("series lists an observable twice")
+        return v
+
+    @field_validator("design")
+    @classmethod
+    def _design_size(cls, v: Design | None) -> Design | None:
+        if v is not None and v.n_points() > MAX_RUNS:  # before any point is drawn
+            raise ValueError(f"{v.n_points()} points, more than the limit of {MAX_RUNS} runs")
+        return v
+
+    @field_validator("analysis")
+    @classmethod
+    def _analysis(cls, v: Analysis | None, info: ValidationInfo) -> Analysis | None:
+        if v is None:
+            return v
+        measures = info.data.get("measure", {})
+        quantities = {q for n, m in measures.items() for q, _ in m.table_quantities(n)}
+        problems = design_problems(info.data.get("design"), v, bool(info.data.get("axes")),
+                                   quantities, MAX_RUNS)
+        if problems:
+            raise ValueError("; ".join(problems))
         return v
 
     @model_validator(mode="after")
@@ -307,13 +335,23 @@ class Sweep(Strict):
     # -- the grid -----------------------------------------------------------------------
 
     def axis_entries(self) -> list[AxisValues]:
-        """Every (path, values) of every axis, zip members flattened."""
-        return [m for a in self.axes for m in (a.zip if isinstance(a, ZipAxis) else [a])]
+        """Every (path, values) of every axis, zip members flattened (the design's paths
+        last, with the design's values)."""
+        return [m for a in self._all_axes for m in (a.zip if isinstance(a, ZipAxis) else [a])]
+
+    @functools.cached_property
+    def _all_axes(self) -> list[AxisValues | ZipAxis]:
+        """The axes, then the design as one more zip axis (its points vary fastest)."""
+        if self.design is None:
+            return list(self.axes)
+        points = self.design.points(self.analysis.kind if self.analysis else None)
+        return [*self.axes, ZipAxis(zip=[AxisValues(path=p, values=[x[p] for x in points])
+                                         for p in self.design.bounds])]
 
     def _grid(self) -> list[dict[str, Any]]:
         """path -> value for each grid point (the 'replicas' pseudo-path included)."""
         choices = []
-        for a in self.axes:
+        for a in self._all_axes:
             members = a.zip if isinstance(a, ZipAxis) else [a]
             length = len(members[0].values)
             choices.append([{m.path: m.values[i] for m in members} for i in range(length)])
@@ -324,6 +362,8 @@ class Sweep(Strict):
     def n_points(self) -> int:
         """Grid points: the product of the axes' lengths."""
         lengths = [(a.length if isinstance(a, ZipAxis) else len(a.values)) for a in self.axes]
+        if self.design is not None:  # counted without drawing the points
+            lengths.append(self.design.n_points(self.analysis.kind if self.analysis else None))
         return math.prod(lengths)
 
     def _replicas_axis(self) -> bool:
@@ -369,6 +409,12 @@ class Sweep(Strict):
         base = self.base_scenario
         doc = base.model_dump(mode="json")
         errors = unknown_paths(doc, self.model_dump(mode="json")["axes"])
+        for path in self.design.bounds if self.design else ():
+            try:
+                check_path(doc, path)
+            except PathError as exc:
+                errors.append(FieldError(loc=f"design.bounds.{path}", msg=str(exc),
+                                         type="unknown_path"))
         if errors:
             raise SweepError(errors)
         runs: list[SweepRun] = []
@@ -502,7 +548,7 @@ def load_sweep(data: Any) -> Sweep:
 def is_sweep_document(data: Any) -> bool:
     """Whether a parsed JSON document is a sweep (rather than a scenario)."""
     return isinstance(data, dict) and "model" not in data and bool(
-        {"axes", "base", "preset", "replicas", "measure", "series"} & set(data))
+        {"axes", "base", "preset", "replicas", "measure", "series", "design"} & set(data))
 
 
 def describe_sweep() -> dict[str, Any]:

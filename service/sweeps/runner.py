@@ -6,6 +6,7 @@ The folder:
   runs.jsonl          the journal: one line per finished run (see journal.py)
   runs.csv, table.csv, series.csv   the tables (see tables.py), rewritten atomically
                       every TABLE_INTERVAL s or more and at the end (also on cancel)
+  sensitivity.csv     with an `analysis`, once every run has finished (sensitivity.py)
   runs/<index>/summary.json         keep = summaries (the default) or all; for
                       summaries it holds the run's measures (its runs.csv columns)
   runs/<index>/{scenario.json, observables.csv, trajectory.h5}   keep = all
@@ -40,6 +41,7 @@ from ..execute import run_summary
 from .executors import Executor, LocalExecutor
 from .journal import Journal, read_journal
 from .measures import reduce_run
+from .sensitivity import write_sensitivity
 from .tables import SWEEP_FILE, atomic_write, axis_columns, write_tables
 
 if TYPE_CHECKING:
@@ -118,6 +120,8 @@ def run_sweep(
         state.write_tables()
     done, failed = state.counts()
     status = "completed" if len(records) == len(runs) else "cancelled"
+    if status == "completed" and sweep.analysis is not None:
+        write_sensitivity(out_dir, sweep)
     return SweepOutcome(status, done, failed, len(runs), out_dir, resumed)
 
 

@@ -59,7 +59,7 @@ def write_tables(out_dir: Path, sweep: Sweep, runs: list[SweepRun],
                      r.seed, rec["status"] if rec else "pending",
                      *(measures.get(c) for c in columns)])
     atomic_write(out_dir / "runs.csv",
-                 _csv(["run", "point", *axes, "replica", "seed", "status", *columns], rows))
+                 csv_text(["run", "point", *axes, "replica", "seed", "status", *columns], rows))
 
     points: dict[int, list[SweepRun]] = {}
     for r in runs:
@@ -74,7 +74,7 @@ def write_tables(out_dir: Path, sweep: Sweep, runs: list[SweepRun],
         cells = [x for n, m in sweep.measure.items()
                  for x in _point_cells(n, m, done, members[0].scenario.n_agents)]
         rows.append([p, *(_axis_cell(members[0].values[a]) for a in axes), *cells])
-    atomic_write(out_dir / "table.csv", _csv(header, rows))
+    atomic_write(out_dir / "table.csv", csv_text(header, rows))
 
     if sweep.series:
         atomic_write(out_dir / "series.csv", _series_csv(sweep, axes, points, records))
@@ -115,7 +115,7 @@ def _series_csv(sweep: Sweep, axes: list[str], points: dict[int, list[SweepRun]]
             rows.append([p, *cells, step, time,
                          *(x for o in sweep.series
                            for x in (mean[o][t], None if sd[o] is None else sd[o][t]))])
-    return _csv(header, rows)
+    return csv_text(header, rows)
 
 
 def read_table(out_dir: Path, fmt: Literal["csv", "json"] = "csv",
@@ -166,7 +166,8 @@ def _num(value: Any) -> str:
     return repr(v) if math.isfinite(v) else ""
 
 
-def _csv(header: list[str], rows: list[list[Any]]) -> str:
+def csv_text(header: list[str], rows: list[list[Any]]) -> str:
+    """One header row, then the rows (cells as _num writes them: empty for None/NaN)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)
