@@ -41,6 +41,8 @@ if TYPE_CHECKING:
 
 # The most points a design may draw (the sweep's run limit applies on top).
 MAX_DESIGN_POINTS = 100_000
+# The most parameters one design may sample (a flocking model has 5-15).
+MAX_DESIGN_AXES = 64
 
 
 class DesignUnavailable(ValueError):
@@ -62,7 +64,8 @@ class Design(Strict):
         description="Seed of the design's random scrambling / permutation: the same seed, "
         "the same points.")
     bounds: dict[StrictStr, RealPair] = Field(
-        min_length=1, description="Dotted field path -> [low, high] (high > low); one "
+        min_length=1, max_length=MAX_DESIGN_AXES, description="Dotted field path -> "
+        "[low, high] (high > low); one "
         "design axis each, a column of runs.csv and table.csv.",
         examples=[{"model.eta": [0, 5], "neighbours.radius": [0.5, 2]}])
     log: list[StrictStr] = Field(default=[], description="Paths sampled uniformly in the "

@@ -148,7 +148,8 @@ def test_morris_sweep_writes_sensitivity_csv(tmp_path, taichi_cpu):
     doc = {**BASE, "design": {"kind": "morris", "n": 3, "seed": 1,
                               "bounds": {"model.eta": [0.5, 5.0], "model.v0": [0.01, 0.3]},
                               "log": ["model.v0"]},
-           "analysis": {"kind": "morris", "measure": "va", "seed": 2}}
+           "analysis": {"kind": "morris", "measure": "va", "seed": 2},
+           "labels": {"model.eta": "η", "model.v0": "v₀", "va": "v_a"}}
     assert run_sweep(load_sweep(doc), tmp_path / "m").status == "completed"
     table = _rows(tmp_path / "m" / "table.csv")
     sens = _rows(tmp_path / "m" / "sensitivity.csv")
@@ -162,3 +163,20 @@ def test_morris_sweep_writes_sensitivity_csv(tmp_path, taichi_cpu):
                                                                 rel=1e-12)
     # more noise lowers the order: eta's mean effect on v_a is negative
     assert float(sens[0]["mu"]) < 0
+
+    # its pictures: the bars (the default for a folder with sensitivity.csv), the scatter
+    from flocklab.service.render.figure import new_figure
+    from flocklab.service.render.plots import draw_sweep
+    from flocklab.service.render.run_data import load_sweep as load_sweep_dir
+
+    data = load_sweep_dir(tmp_path / "m")
+    fig = new_figure(800, 600)
+    assert draw_sweep(fig, data, None, 800, 600) == ["sensitivity"]
+    (ax,) = fig.axes
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["η", "v₀"]
+    heights = sorted(round(b.get_height(), 9) for b in ax.patches)
+    assert heights == sorted(round(float(r[c]), 9) for r in sens for c in ("mu_star", "sigma"))
+    fig = new_figure(800, 600)
+    assert draw_sweep(fig, data, ["va"], 800, 600) == ["va"]
+    assert [a.get_xlabel() for a in fig.axes] == ["η", "v₀"]
+    assert fig.axes[1].get_xscale() == "log"

@@ -71,13 +71,27 @@ def draw_sweep(fig: Any, sweep: SweepData, names: list[str] | None, width: int,
     """Each measure against the first axis, one curve per value of the second axis, error
     bars from the replicas' standard error (else their standard deviation; where a point
     has one replica, its tau_int-based error `_err` when the table has one), labelled
-    with the sweep's symbols (`SweepData.label`)."""
+    with the sweep's symbols (`SweepData.label`). A design sweep without axes: each
+    measure against each design parameter; names ["sensitivity"] (the default when the
+    folder has sensitivity.csv): the sensitivity bars (sensitivity_plot.py)."""
     check_size(width, height)
+    from .sensitivity_plot import draw_design, draw_sensitivity, has_sensitivity
+
+    if names == ["sensitivity"] or (names is None and has_sensitivity(sweep.folder)):
+        if not has_sensitivity(sweep.folder):
+            raise RenderInputError(f"{sweep.folder}: no sensitivity.csv (a sweep with an "
+                                   "analysis writes it when every run has finished)",
+                                   loc="names")
+        draw_sensitivity(fig, sweep, width, height)
+        return ["sensitivity"]
     measures = names or sweep.measures
     unknown = [m for m in measures if f"{m}_mean" not in sweep.columns]
     if unknown or not measures:
         raise RenderInputError(f"unknown measure(s) {', '.join(unknown) or '(none)'}; "
                                f"the sweep has: {', '.join(sweep.measures)}", loc="names")
+    spec = sweep.spec.get("sweep") if isinstance(sweep.spec.get("sweep"), dict) else {}
+    if spec.get("design") and not spec.get("axes"):
+        return draw_design(fig, sweep, measures, width, height)
     x_axis = sweep.axes[0]
     group = sweep.axes[1] if len(sweep.axes) > 1 else None
     x, ticks = _axis_positions(sweep, x_axis)
