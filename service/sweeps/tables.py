@@ -17,6 +17,9 @@ Columns:
               susceptibility from the pooled moments, sem by the jackknife: measures.py)
   series.csv  point, <axis paths>, step, time, then per series <obs>_mean, <obs>_sd
               (over the completed replicas of the point, at each observation step)
+  sensitivity.csv  with an `analysis`: parameter, its indices, points, points_missing
+              (sensitivity.py)
+Design paths are axis columns too (after the axes'), their values the design's.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from flocklab.schemas.sweep import REPLICAS_PATH, Measure, Sweep, SweepRun
 
 from .measures import combined_error, pooled_stats, replica_stats
 
-TABLES = ("runs", "table", "series")
+TABLES = ("runs", "table", "series", "sensitivity")
 SWEEP_FILE = "sweep.json"
 
 
@@ -119,7 +122,8 @@ def _series_csv(sweep: Sweep, axes: list[str], points: dict[int, list[SweepRun]]
 
 
 def read_table(out_dir: Path, fmt: Literal["csv", "json"] = "csv",
-               name: Literal["table", "runs", "series"] = "table") -> bytes | dict[str, Any]:
+               name: Literal["table", "runs", "series", "sensitivity"] = "table"
+               ) -> bytes | dict[str, Any]:
     """A table of a sweep folder: the CSV bytes, or {"columns": [...], "data": [[...]]}
     with typed cells (numbers, axis values as in the sweep file, null for empty cells;
     `pandas.DataFrame(**obj)` builds the frame). FileNotFoundError before it is written."""
@@ -133,20 +137,26 @@ def read_table(out_dir: Path, fmt: Literal["csv", "json"] = "csv",
     sweep = json.loads((Path(out_dir) / SWEEP_FILE).read_text())["sweep"]
     axis_values = {a["path"]: a["values"] for ax in sweep["axes"]
                    for a in ax.get("zip", [ax])}
+    integers = set((sweep.get("design") or {}).get("integer", []))
     reader = csv.reader(io.StringIO(raw.decode()))
     columns = next(reader)
-    parse = [_cell_parser(c, axis_values.get(c)) for c in columns]
+    if name == "sensitivity":
+        parse = [str if c == "parameter" else _cell_parser(c, None, c.startswith("points"))
+                 for c in columns]
+    else:
+        parse = [_cell_parser(c, axis_values.get(c), c in integers) for c in columns]
     return {"columns": columns,
             "data": [[f(cell) for f, cell in zip(parse, row, strict=True)] for row in reader]}
 
 
-def _cell_parser(column: str, values: list[Any] | None):
+def _cell_parser(column: str, values: list[Any] | None, integer: bool = False):
     if values is not None:  # an axis: map the written text back to the sweep's value
         lookup = {_axis_cell(v): v for v in values}
         return lambda cell: lookup.get(cell, cell)
     if column == "status":
         return str
-    if column in ("run", "point", "replica", "seed", "step") or column.endswith("_count"):
+    if integer or column in ("run", "point", "replica", "seed", "step") or column.endswith(
+            "_count"):
         return lambda cell: int(cell) if cell else None
     return lambda cell: float(cell) if cell else None
 
