@@ -180,3 +180,23 @@ def test_morris_sweep_writes_sensitivity_csv(tmp_path, taichi_cpu):
     assert draw_sweep(fig, data, ["va"], 800, 600) == ["va"]
     assert [a.get_xlabel() for a in fig.axes] == ["η", "v₀"]
     assert fig.axes[1].get_xscale() == "log"
+
+
+def test_a_folder_from_before_designs_still_resumes(tmp_path, taichi_cpu):
+    """sweep.json written without the fields added since (design, analysis, labels): the
+    same sweep resumes there; one that sets a new field is another sweep."""
+    import json
+
+    from flocklab.service.sweeps import SweepFolderConflict
+
+    doc = {**BASE, "axes": [{"path": "model.eta", "values": [1.0, 2.0]}]}
+    out = tmp_path / "s"
+    run_sweep(load_sweep(doc), out)
+    meta = json.loads((out / "sweep.json").read_text())
+    for k in ("design", "analysis", "labels"):
+        del meta["sweep"][k]
+    (out / "sweep.json").write_text(json.dumps(meta))
+    again = run_sweep(load_sweep(doc), out)
+    assert (again.status, again.runs_resumed) == ("completed", 2)
+    with pytest.raises(SweepFolderConflict):
+        run_sweep(load_sweep({**doc, "labels": {"model.eta": "η"}}), out)

@@ -239,7 +239,12 @@ def _check_folder(out_dir: Path, sweep: Sweep) -> bool:
             old = json.loads(path.read_text())["sweep"]
         except (ValueError, KeyError, TypeError):
             raise SweepFolderConflict(f"{path} is not a flocklab sweep file") from None
-        if old != sweep.model_dump(mode="json"):
+        new = sweep.model_dump(mode="json")
+        # A field added since the folder was made (design, analysis, labels) matches when
+        # this sweep leaves it at its default.
+        new = {k: v for k, v in new.items()
+               if k in old or v != type(sweep).model_fields[k].get_default()}
+        if old != new:
             raise SweepFolderConflict(
                 f"{out_dir} holds a different sweep ({old.get('name')!r}; its sweep.json "
                 "differs from this one): choose another folder")
