@@ -290,6 +290,8 @@ class Sweep(Strict):
 
     @model_validator(mode="after")
     def _label_keys(self) -> Sweep:
+        if not self.labels:
+            return self
         known = {a.path for a in self.axis_entries()} | {
             q for n, m in self.measure.items() for q, _ in m.table_quantities(n)}
         unknown = sorted(set(self.labels) - known)
