@@ -15,7 +15,7 @@ from .errors import FlocklabError
 if TYPE_CHECKING:
     import pandas
 
-TABLES = ("table", "runs", "series")
+TABLES = ("table", "runs", "series", "sensitivity")
 
 
 class SweepFailed(FlocklabError):

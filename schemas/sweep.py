@@ -35,6 +35,7 @@ from pydantic import (
     StrictStr,
     Tag,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -44,6 +45,7 @@ from .paths import PathError, check_path, merge, set_path, split_path
 from .presets import PRESETS
 from .problems import FieldError, field_errors
 from .scenario import Scenario
+from .sweep_design import Analysis, Design, design_problems
 
 # The most runs one sweep may expand to (the CLI's only limit; a service sets its own).
 MAX_RUNS = 100_000
@@ -55,7 +57,24 @@ REPLICAS_PATH = "replicas"
 RESERVED_COLUMNS = frozenset({"run", "point", "replica", "seed", "status", "step", "time"})
 _MEASURE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
-Reduce = Literal["mean", "std", "final", "min", "max", "converge_time"]
+Reduce = Literal["mean", "std", "final", "min", "max", "converge_time",
+                 "moments", "binder", "susceptibility", "tau_int"]
+# The columns a measure named m adds to runs.csv (its suffixes after m; one column, m
+# itself, for the other reduces) and the quantities of table.csv (each q gives q_mean,
+# q_sd, q_sem, q_count, and q_err where the runs carry an error). See docs/SWEEPS.md,
+# "Transition statistics".
+RUN_SUFFIXES: dict[str, tuple[str, ...]] = {
+    "moments": ("_m1", "_m1_err", "_m2", "_m2_err", "_m4", "_m4_err", "_tau"),
+    "binder": ("", "_err", "_m2", "_m4"),
+    "susceptibility": ("", "_err", "_m1", "_m2"),
+    "tau_int": ("", "_err", "_window"),
+}
+TABLE_QUANTITIES: dict[str, tuple[tuple[str, bool], ...]] = {  # (suffix, has an error)
+    "moments": (("_m1", True), ("_m2", True), ("_m4", True), ("_tau", False)),
+    "binder": (("", True),),
+    "susceptibility": (("", True),),
+    "tau_int": (("", True),),
+}
 
 
 class SweepError(ValueError):
@@ -134,7 +153,11 @@ class Measure(Strict):
     reduce: Reduce = Field(description="mean / std (population std over the window) / "
                            "final (last value in the window) / min / max / converge_time "
                            "(first time after which the value stays below `tolerance` to the "
-                           "window's end; empty when it never does).")
+                           "window's end; empty when it never does) / moments (<x>, <x^2>, "
+                           "<x^4> with tau_int-corrected errors) / binder (G = 1 - <x^4> / "
+                           "(3 <x^2>^2)) / susceptibility (chi = N (<x^2> - <x>^2)) / "
+                           "tau_int (Sokal's integrated autocorrelation time, in "
+                           "observation intervals). See docs/SWEEPS.md.")
     from_step: NonNegativeInt | None = Field(default=None, description="First step "
                                              "included (default: 0).")
     to_step: NonNegativeInt | None = Field(default=None, description="Last step included "
@@ -150,6 +173,15 @@ class Measure(Strict):
         if self.tolerance is not None and self.reduce != "converge_time":
             raise ValueError("tolerance applies to reduce 'converge_time' only")
         return self
+
+    def run_columns(self, name: str) -> list[str]:
+        """This measure's columns of runs.csv (and keys of a run's journal record)."""
+        return [name + s for s in RUN_SUFFIXES.get(self.reduce, ("",))]
+
+    def table_quantities(self, name: str) -> list[tuple[str, bool]]:
+        """(quantity, has an error) per quantity of table.csv: q_mean, q_sd, q_sem,
+        [q_err,] q_count."""
+        return [(name + s, e) for s, e in TABLE_QUANTITIES.get(self.reduce, (("", False),))]
 
 
 @dataclass(frozen=True)
@@ -187,6 +219,16 @@ class Sweep(Strict):
                                         "observable; a column of runs.csv and table.csv.")
     series: list[StrictStr] = Field(default=[], description="Observables averaged over "
                                     "replicas per grid point and step (series.csv).")
+    design: Design | None = Field(default=None, description="A sampling design (lhs, "
+                                  "sobol, halton, morris) over `bounds`: its points are grid "
+                                  "points (times the axes' grid, when both are given).")
+    analysis: Analysis | None = Field(default=None, description="A sensitivity analysis "
+                                      "(sobol, morris) of one measure over the design: "
+                                      "sensitivity.csv.")
+    labels: dict[StrictStr, Annotated[StrictStr, Field(min_length=1, max_length=40)]] = Field(
+        default={}, description="Symbols for pictures (`flocklab render`): an axis path or "
+        "a table quantity (a measure's name; for moments <m>_m1, <m>_m2, <m>_m4, <m>_tau) "
+        "-> its label, e.g. {\"model.eta\": \"η\", \"space.L\": \"L\"}.")
     keep: Literal["table", "summaries", "all"] = Field(
         default="summaries", description="table: only the tables (the runs then compute only "
         "the observables the measures and series read, unless the base names its own "
@@ -207,6 +249,16 @@ class Sweep(Strict):
             if not _MEASURE_NAME.fullmatch(name) or name in RESERVED_COLUMNS:
                 raise ValueError(f"measure name {name!r} must be an identifier other than "
                                  f"{', '.join(sorted(RESERVED_COLUMNS))}")
+        owners: dict[tuple[str, str], str] = {}  # (file, column) -> the measure writing it
+        for name, m in v.items():
+            table = [q + s for q, e in m.table_quantities(name)
+                     for s in ("_mean", "_sd", "_sem", "_count", *(("_err",) if e else ()))]
+            for key in [*(("runs.csv", c) for c in m.run_columns(name)),
+                        *(("table.csv", c) for c in table)]:
+                if key in owners:
+                    raise ValueError(f"measures {owners[key]!r} and {name!r} both write the "
+                                     f"column {key[1]!r} of {key[0]}: rename one")
+                owners[key] = name
         return v
 
     @field_validator("series")
@@ -215,6 +267,39 @@ class Sweep(Strict):
         if len(set(v)) != len(v):
             raise ValueError("series lists an observable twice")
         return v
+
+    @field_validator("design")
+    @classmethod
+    def _design_size(cls, v: Design | None) -> Design | None:
+        if v is not None and v.n_points() > MAX_RUNS:  # before any point is drawn
+            raise ValueError(f"{v.n_points()} points, more than the limit of {MAX_RUNS} runs")
+        return v
+
+    @field_validator("analysis")
+    @classmethod
+    def _analysis(cls, v: Analysis | None, info: ValidationInfo) -> Analysis | None:
+        if v is None:
+            return v
+        measures = info.data.get("measure", {})
+        quantities = {q for n, m in measures.items() for q, _ in m.table_quantities(n)}
+        problems = design_problems(info.data.get("design"), v, bool(info.data.get("axes")),
+                                   quantities, MAX_RUNS)
+        if problems:
+            raise ValueError("; ".join(problems))
+        return v
+
+    @model_validator(mode="after")
+    def _label_keys(self) -> Sweep:
+        if not self.labels:
+            return self
+        known = {a.path for a in self.axis_entries()} | {
+            q for n, m in self.measure.items() for q, _ in m.table_quantities(n)}
+        unknown = sorted(set(self.labels) - known)
+        if unknown:
+            raise ValueError(f"labels: {', '.join(map(repr, unknown))} is neither an axis "
+                             f"path nor a measure's quantity (known: "
+                             f"{', '.join(sorted(known)) or 'none'})")
+        return self
 
     @model_validator(mode="after")
     def _structure(self) -> Sweep:
@@ -252,13 +337,23 @@ class Sweep(Strict):
     # -- the grid -----------------------------------------------------------------------
 
     def axis_entries(self) -> list[AxisValues]:
-        """Every (path, values) of every axis, zip members flattened."""
-        return [m for a in self.axes for m in (a.zip if isinstance(a, ZipAxis) else [a])]
+        """Every (path, values) of every axis, zip members flattened (the design's paths
+        last, with the design's values)."""
+        return [m for a in self._all_axes for m in (a.zip if isinstance(a, ZipAxis) else [a])]
+
+    @functools.cached_property
+    def _all_axes(self) -> list[AxisValues | ZipAxis]:
+        """The axes, then the design as one more zip axis (its points vary fastest)."""
+        if self.design is None:
+            return list(self.axes)
+        points = self.design.points(self.analysis.kind if self.analysis else None)
+        return [*self.axes, ZipAxis(zip=[AxisValues(path=p, values=[x[p] for x in points])
+                                         for p in self.design.bounds])]
 
     def _grid(self) -> list[dict[str, Any]]:
         """path -> value for each grid point (the 'replicas' pseudo-path included)."""
         choices = []
-        for a in self.axes:
+        for a in self._all_axes:
             members = a.zip if isinstance(a, ZipAxis) else [a]
             length = len(members[0].values)
             choices.append([{m.path: m.values[i] for m in members} for i in range(length)])
@@ -269,6 +364,8 @@ class Sweep(Strict):
     def n_points(self) -> int:
         """Grid points: the product of the axes' lengths."""
         lengths = [(a.length if isinstance(a, ZipAxis) else len(a.values)) for a in self.axes]
+        if self.design is not None:  # counted without drawing the points
+            lengths.append(self.design.n_points(self.analysis.kind if self.analysis else None))
         return math.prod(lengths)
 
     def _replicas_axis(self) -> bool:
@@ -314,6 +411,12 @@ class Sweep(Strict):
         base = self.base_scenario
         doc = base.model_dump(mode="json")
         errors = unknown_paths(doc, self.model_dump(mode="json")["axes"])
+        for path in self.design.bounds if self.design else ():
+            try:
+                check_path(doc, path)
+            except PathError as exc:
+                errors.append(FieldError(loc=f"design.bounds.{path}", msg=str(exc),
+                                         type="unknown_path"))
         if errors:
             raise SweepError(errors)
         runs: list[SweepRun] = []
@@ -447,7 +550,7 @@ def load_sweep(data: Any) -> Sweep:
 def is_sweep_document(data: Any) -> bool:
     """Whether a parsed JSON document is a sweep (rather than a scenario)."""
     return isinstance(data, dict) and "model" not in data and bool(
-        {"axes", "base", "preset", "replicas", "measure", "series"} & set(data))
+        {"axes", "base", "preset", "replicas", "measure", "series", "design"} & set(data))
 
 
 def describe_sweep() -> dict[str, Any]:

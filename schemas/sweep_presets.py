@@ -112,3 +112,49 @@ def vicsek_1995_fig2b() -> dict[str, Any]:
         "series": ["polarization"],
         "keep": "summaries",
     }
+
+
+# The finite-size-scaling preset: Chaté, Ginelli, Grégoire & Raynaud's setting (PRE 77,
+# 046113 (2008): v0 = 0.5, rho = 2, r = 1), flocklab's angular noise (full width eta).
+FSS_SIDES = (8, 16, 32)
+FSS_DENSITY = 2
+FSS_ETAS = tuple(round(2.2 + 0.2 * k, 10) for k in range(11))  # 2.2 .. 4.2
+FSS_STEPS, FSS_WARM_UP = 5000, 1000
+
+
+@register_sweep_preset(
+    "vicsek-fss",
+    "Finite-size scaling of the Vicsek transition: Binder cumulant G and susceptibility "
+    "chi of the polarization vs eta = 2.2..4.2 at density 2, v0 = 0.5, for L = 8, 16, 32 "
+    "(8/4/4 seeds, 5000 steps, statistics from step 1000).")
+def vicsek_fss() -> dict[str, Any]:
+    base = _vicsek_1995_base(FSS_DENSITY * FSS_SIDES[0] ** 2, FSS_SIDES[0], FSS_ETAS[0],
+                             FSS_STEPS)
+    base["name"] = "vicsek-fss"
+    base["model"]["v0"] = 0.5
+    base["recording"]["observables_every"] = 5
+
+    def stat(reduce: str) -> dict[str, Any]:
+        return {"observable": "polarization", "reduce": reduce, "from_step": FSS_WARM_UP}
+
+    return {
+        "name": "vicsek-fss",
+        "description": "G = 1 - <phi^4> / (3 <phi^2>^2) and chi = N (<phi^2> - <phi>^2) of "
+                       "phi = |sum_i e^{i theta_i}| / N against eta, per L at rho = N / L^2 "
+                       "= 2.",
+        "base": base,
+        "axes": [
+            {"path": "model.eta", "values": list(FSS_ETAS)},
+            {"zip": [
+                {"path": "space.L", "values": list(FSS_SIDES)},
+                {"path": "initial.N", "values": [FSS_DENSITY * s * s for s in FSS_SIDES]},
+                {"path": "replicas", "values": [8, 4, 4]},
+            ]},
+        ],
+        "measure": {"G": stat("binder"), "chi": stat("susceptibility"),
+                    "phi": stat("moments"), "tau": stat("tau_int")},
+        "labels": {"model.eta": "η", "space.L": "L", "initial.N": "N", "G": "G",
+                   "chi": "χ", "phi_m1": "⟨φ⟩", "phi_m2": "⟨φ²⟩", "phi_m4": "⟨φ⁴⟩",
+                   "phi_tau": "τ_int(φ)", "tau": "τ_int(φ)"},
+        "keep": "summaries",
+    }

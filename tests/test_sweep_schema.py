@@ -215,7 +215,7 @@ def test_vicsek_fig2_presets_state_the_full_protocol():
     b = get_sweep_preset("vicsek-1995-fig2b")
     for r in b.expand():
         assert r.scenario.space.L == 20.0 and r.scenario.model.eta == 2.0
-    assert sorted(SWEEP_PRESETS) == ["vicsek-1995-fig2a", "vicsek-1995-fig2b"]
+    assert sorted(SWEEP_PRESETS) == ["vicsek-1995-fig2a", "vicsek-1995-fig2b", "vicsek-fss"]
     assert math.isclose(b.n_runs, 40)
 
 

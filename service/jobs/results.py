@@ -23,7 +23,7 @@ from collections.abc import Collection
 from pathlib import Path
 
 RESULT_FILES = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5")
-SWEEP_FILES = ("sweep.json", "runs.csv", "table.csv", "series.csv")
+SWEEP_FILES = ("sweep.json", "runs.csv", "table.csv", "series.csv", "sensitivity.csv")
 
 
 class ResultStore:

@@ -69,13 +69,29 @@ def draw_observables(fig: Any, run: RunData, names: list[str] | None, width: int
 def draw_sweep(fig: Any, sweep: SweepData, names: list[str] | None, width: int,
                height: int) -> list[str]:
     """Each measure against the first axis, one curve per value of the second axis, error
-    bars from the replicas' standard error (else their standard deviation)."""
+    bars from the replicas' standard error (else their standard deviation; where a point
+    has one replica, its tau_int-based error `_err` when the table has one), labelled
+    with the sweep's symbols (`SweepData.label`). A design sweep without axes: each
+    measure against each design parameter; names ["sensitivity"] (the default when the
+    folder has sensitivity.csv): the sensitivity bars (sensitivity_plot.py)."""
     check_size(width, height)
+    from .sensitivity_plot import draw_design, draw_sensitivity, has_sensitivity
+
+    if names == ["sensitivity"] or (names is None and has_sensitivity(sweep.folder)):
+        if not has_sensitivity(sweep.folder):
+            raise RenderInputError(f"{sweep.folder}: no sensitivity.csv (a sweep with an "
+                                   "analysis writes it when every run has finished)",
+                                   loc="names")
+        draw_sensitivity(fig, sweep, width, height)
+        return ["sensitivity"]
     measures = names or sweep.measures
     unknown = [m for m in measures if f"{m}_mean" not in sweep.columns]
     if unknown or not measures:
         raise RenderInputError(f"unknown measure(s) {', '.join(unknown) or '(none)'}; "
                                f"the sweep has: {', '.join(sweep.measures)}", loc="names")
+    spec = sweep.spec.get("sweep") if isinstance(sweep.spec.get("sweep"), dict) else {}
+    if spec.get("design") and not spec.get("axes"):
+        return draw_design(fig, sweep, measures, width, height)
     x_axis = sweep.axes[0]
     group = sweep.axes[1] if len(sweep.axes) > 1 else None
     x, ticks = _axis_positions(sweep, x_axis)
@@ -85,19 +101,23 @@ def draw_sweep(fig: Any, sweep: SweepData, names: list[str] | None, width: int,
     for ax, m in zip(axes, measures, strict=True):
         mean = sweep.columns[f"{m}_mean"]
         err = sweep.columns.get(f"{m}_sem", sweep.columns.get(f"{m}_sd"))
+        if err is not None and f"{m}_err" in sweep.columns:
+            err = np.where(np.isfinite(err), err, sweep.columns[f"{m}_err"])
         for g in groups:
             rows = np.array([k == g for k in keys])
             order = np.argsort(x[rows], kind="stable")
             yerr = None if err is None else np.nan_to_num(err[rows][order])
             ax.errorbar(x[rows][order], mean[rows][order], yerr=yerr, marker="o", ms=4,
-                        capsize=3, lw=1.2, label=f"{group} = {g}" if group else None)
-        ax.set_ylabel(m, fontsize=8)
+                        capsize=3, lw=1.2,
+                        label=f"{sweep.label(group)} = {g}" if group else None)
+        symbol = sweep.label(m)  # a symbol (G, χ) reads at the size of the tick labels
+        ax.set_ylabel(symbol, fontsize=11 if len(symbol) <= 8 else 8)
         ax.grid(alpha=0.3)
         if group is not None:
             ax.legend(fontsize=7)
     if ticks is not None:
         axes[-1].set_xticks(range(len(ticks)), ticks)
-    axes[-1].set_xlabel(x_axis)
+    axes[-1].set_xlabel(sweep.label(x_axis))
     bars = "sem" if any(f"{m}_sem" in sweep.columns for m in measures) else "sd"
     fig.suptitle(f"{sweep.name}: mean ± {bars} over replicas", fontsize=10)
     fig.tight_layout()

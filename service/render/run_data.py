@@ -234,28 +234,56 @@ class SweepData:
     def measures(self) -> list[str]:
         return [c.removesuffix("_mean") for c in self.columns if c.endswith("_mean")]
 
+    def label(self, name: str) -> str:
+        """The symbol of an axis path or a table quantity: the sweep's `labels`, else the
+        literature's for a binder (G), susceptibility (chi) or tau_int measure, else the
+        name itself."""
+        sweep = self.spec.get("sweep")
+        sweep = sweep if isinstance(sweep, dict) else {}
+        labels = sweep.get("labels")
+        if isinstance(labels, dict) and isinstance(labels.get(name), str):
+            return labels[name]
+        measure = (sweep.get("measure") or {}).get(name) if isinstance(
+            sweep.get("measure"), dict) else None
+        reduce = measure.get("reduce") if isinstance(measure, dict) else None
+        return REDUCE_SYMBOLS.get(reduce, name) if isinstance(reduce, str) else name
+
+
+# The usual symbols of the transition statistics (docs/SWEEPS.md).
+REDUCE_SYMBOLS = {"binder": "G", "susceptibility": "χ", "tau_int": "τ_int"}
+
 
 def is_sweep_dir(folder: Path) -> bool:
     return (Path(folder) / "table.csv").is_file() and (Path(folder) / "sweep.json").is_file()
+
+
+def read_csv_columns(path: Path) -> tuple[dict[str, list[str]], dict[str, np.ndarray]]:
+    """A CSV of the sweep folder by column: the cells as written, and as numbers (NaN
+    where a cell is not one); RenderInputError when unreadable or empty."""
+    try:
+        with Path(path).open(newline="") as f:
+            rows = list(csv.reader(f))
+    except (OSError, ValueError) as exc:
+        raise RenderInputError(f"{path}: unreadable: {exc}") from exc
+    if not rows:
+        raise RenderInputError(f"{path}: empty")
+    text = {n: [r[i] if i < len(r) else "" for r in rows[1:]] for i, n in enumerate(rows[0])}
+    return text, {n: np.array([_number(v) for v in vals]) for n, vals in text.items()}
 
 
 def load_sweep(folder: Path) -> SweepData:
     folder = Path(folder)
     try:
         spec = json.loads((folder / "sweep.json").read_text())
-        with (folder / "table.csv").open(newline="") as f:
-            rows = list(csv.reader(f))
     except (OSError, ValueError) as exc:
         raise RenderInputError(f"{folder}: unreadable sweep files: {exc}") from exc
+    text, columns = read_csv_columns(folder / "table.csv")
     axes = [_axis_name(a) for a in spec.get("axes", [])] if isinstance(spec, dict) else []
-    if not rows or not axes:
+    if not next(iter(text.values()), []) or not axes:
         raise RenderInputError(f"{folder}: the sweep has no rows or no axes")
-    names = rows[0]
-    missing = [a for a in axes if a not in names]
+    missing = [a for a in axes if a not in text]
     if missing:
         raise RenderInputError(f"{folder}/table.csv has no column for the axes {missing}")
-    text = {n: [r[i] if i < len(r) else "" for r in rows[1:]] for i, n in enumerate(names)}
-    columns = {n: np.array([_number(v) for v in vals]) for n, vals in text.items()}
     return SweepData(folder, spec, axes, columns, text)
 
 

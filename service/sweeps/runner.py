@@ -6,7 +6,9 @@ The folder:
   runs.jsonl          the journal: one line per finished run (see journal.py)
   runs.csv, table.csv, series.csv   the tables (see tables.py), rewritten atomically
                       every TABLE_INTERVAL s or more and at the end (also on cancel)
-  runs/<index>/summary.json         keep = summaries (the default) or all
+  sensitivity.csv     with an `analysis`, once every run has finished (sensitivity.py)
+  runs/<index>/summary.json         keep = summaries (the default) or all; for
+                      summaries it holds the run's measures (its runs.csv columns)
   runs/<index>/{scenario.json, observables.csv, trajectory.h5}   keep = all
 Running the same sweep into the same folder again resumes it: runs found in the journal
 are not redone. A folder holding a different sweep is refused (SweepFolderConflict).
@@ -40,6 +42,7 @@ from ..execute import run_summary
 from .executors import Executor, LocalExecutor
 from .journal import Journal, read_journal
 from .measures import reduce_run
+from .sensitivity import write_sensitivity
 from .tables import SWEEP_FILE, atomic_write, axis_columns, write_tables
 
 if TYPE_CHECKING:
@@ -118,6 +121,8 @@ def run_sweep(
         state.write_tables()
     done, failed = state.counts()
     status = "completed" if len(records) == len(runs) else "cancelled"
+    if status == "completed" and sweep.analysis is not None:
+        write_sensitivity(out_dir, sweep)
     return SweepOutcome(status, done, failed, len(runs), out_dir, resumed)
 
 
@@ -151,6 +156,7 @@ class _State:
             summary["sweep_run"] = {"run": run.index, "point": run.point,
                                     "replica": run.replica, "seed": run.seed,
                                     "values": run.values}
+            summary["measures"] = record["measures"]  # this run's columns of runs.csv
             folder = self.out_dir / "runs" / str(run.index)
             folder.mkdir(parents=True, exist_ok=True)
             atomic_write(folder / "summary.json",
@@ -177,8 +183,11 @@ def _record(sweep: Sweep, run: SweepRun, result: RunResult) -> dict[str, Any]:
     if completed:
         _require_observables(sweep, run, obs)
     tol = run.scenario.convergence.tolerance
-    measures = {name: _finite(reduce_run(m, obs, tol)) if completed else None
-                for name, m in sweep.measure.items()}
+    measures: dict[str, float | None] = {}
+    for name, m in sweep.measure.items():
+        cols = reduce_run(name, m, obs, tol, run.scenario.n_agents) if completed \
+            else dict.fromkeys(m.run_columns(name))
+        measures.update({k: _finite(v) for k, v in cols.items()})
     series: dict[str, list[Any]] = {}
     if completed and sweep.series:
         series = {"step": [int(s) for s in obs["step"]], "time": [float(t) for t in obs["time"]]}
@@ -231,7 +240,12 @@ def _check_folder(out_dir: Path, sweep: Sweep) -> bool:
             old = json.loads(path.read_text())["sweep"]
         except (ValueError, KeyError, TypeError):
             raise SweepFolderConflict(f"{path} is not a flocklab sweep file") from None
-        if old != sweep.model_dump(mode="json"):
+        new = sweep.model_dump(mode="json")
+        # A field added since the folder was made (design, analysis, labels) matches when
+        # this sweep leaves it at its default.
+        new = {k: v for k, v in new.items()
+               if k in old or v != type(sweep).model_fields[k].get_default()}
+        if old != new:
             raise SweepFolderConflict(
                 f"{out_dir} holds a different sweep ({old.get('name')!r}; its sweep.json "
                 "differs from this one): choose another folder")

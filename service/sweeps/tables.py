@@ -7,12 +7,19 @@ done) is an empty cell, which both read as NaN. Axis values are written as JSON 
 true/false, objects), strings as they are.
 
 Columns:
-  runs.csv    run, point, <axis paths>, replica, seed, status, <measures>
-              (status: completed, diverged, or pending for a run not done yet)
-  table.csv   point, <axis paths>, then per measure <m>_mean, <m>_sd, <m>_sem, <m>_count
-              (over the replicas with a value; sd is the sample sd, sem = sd / sqrt(count))
+  runs.csv    run, point, <axis paths>, replica, seed, status, then each measure's
+              columns (Measure.run_columns: <m>, or e.g. <m>, <m>_err, <m>_m2, <m>_m4
+              for binder) (status: completed, diverged, or pending for a run not done yet)
+  table.csv   point, <axis paths>, then per quantity q of each measure (q = <m>, or
+              <m>_m1 ... for moments: Measure.table_quantities) q_mean, q_sd, q_sem,
+              [q_err,] q_count (over the replicas with a value; sd is the sample sd,
+              sem = sd / sqrt(count); err from the runs' tau_int-based errors; binder and
+              susceptibility from the pooled moments, sem by the jackknife: measures.py)
   series.csv  point, <axis paths>, step, time, then per series <obs>_mean, <obs>_sd
               (over the completed replicas of the point, at each observation step)
+  sensitivity.csv  with an `analysis`: parameter, its indices, points, points_missing
+              (sensitivity.py)
+Design paths are axis columns too (after the axes'), their values the design's.
 """
 
 from __future__ import annotations
@@ -28,11 +35,11 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flocklab.schemas.sweep import REPLICAS_PATH, Sweep, SweepRun
+from flocklab.schemas.sweep import REPLICAS_PATH, Measure, Sweep, SweepRun
 
-from .measures import replica_stats
+from .measures import combined_error, pooled_stats, replica_stats
 
-TABLES = ("runs", "table", "series")
+TABLES = ("runs", "table", "series", "sensitivity")
 SWEEP_FILE = "sweep.json"
 
 
@@ -46,32 +53,50 @@ def write_tables(out_dir: Path, sweep: Sweep, runs: list[SweepRun],
     """(Re)write runs.csv, table.csv and, when the sweep names series, series.csv from the
     finished runs' records (index -> record, see runner.py)."""
     axes = axis_columns(sweep)
-    names = list(sweep.measure)
+    columns = [c for n, m in sweep.measure.items() for c in m.run_columns(n)]
     rows = []
     for r in runs:
         rec = records.get(r.index)
         measures = rec["measures"] if rec else {}
         rows.append([r.index, r.point, *(_axis_cell(r.values[a]) for a in axes), r.replica,
                      r.seed, rec["status"] if rec else "pending",
-                     *(measures.get(n) for n in names)])
+                     *(measures.get(c) for c in columns)])
     atomic_write(out_dir / "runs.csv",
-                 _csv(["run", "point", *axes, "replica", "seed", "status", *names], rows))
+                 csv_text(["run", "point", *axes, "replica", "seed", "status", *columns], rows))
 
     points: dict[int, list[SweepRun]] = {}
     for r in runs:
         points.setdefault(r.point, []).append(r)
-    header = ["point", *axes, *(f"{n}_{s}" for n in names for s in ("mean", "sd", "sem",
-                                                                       "count"))]
+    header = ["point", *axes, *(f"{q}_{s}" for n, m in sweep.measure.items()
+                                for q, err in m.table_quantities(n)
+                                for s in (("mean", "sd", "sem", "err", "count") if err
+                                          else ("mean", "sd", "sem", "count")))]
     rows = []
     for p, members in points.items():
-        done = [records[r.index] for r in members if r.index in records]
-        stats = [replica_stats([rec["measures"].get(n) for rec in done]) for n in names]
-        rows.append([p, *(_axis_cell(members[0].values[a]) for a in axes),
-                     *(x for s in stats for x in s)])
-    atomic_write(out_dir / "table.csv", _csv(header, rows))
+        done = [records[r.index]["measures"] for r in members if r.index in records]
+        cells = [x for n, m in sweep.measure.items()
+                 for x in _point_cells(n, m, done, members[0].scenario.n_agents)]
+        rows.append([p, *(_axis_cell(members[0].values[a]) for a in axes), *cells])
+    atomic_write(out_dir / "table.csv", csv_text(header, rows))
 
     if sweep.series:
         atomic_write(out_dir / "series.csv", _series_csv(sweep, axes, points, records))
+
+
+def _point_cells(name: str, m: Measure, done: list[dict[str, Any]],
+                 n_agents: int) -> list[Any]:
+    """One grid point's table cells of one measure, quantity by quantity: binder and
+    susceptibility from the pooled moments (measures.pooled_stats), every other quantity
+    the replicas' mean/sd/sem, and err from the runs' own errors where they carry one."""
+    if m.reduce in ("binder", "susceptibility"):
+        value, sd, sem, err, count = pooled_stats(m.reduce, done, name, n_agents)
+        return [value, sd, sem, err, count]
+    cells: list[Any] = []
+    for q, has_err in m.table_quantities(name):
+        mean, sd, sem, count = replica_stats([d.get(q) for d in done])
+        err = [combined_error([d.get(q + "_err") for d in done])] if has_err else []
+        cells += [mean, sd, sem, *err, count]
+    return cells
 
 
 def _series_csv(sweep: Sweep, axes: list[str], points: dict[int, list[SweepRun]],
@@ -93,11 +118,12 @@ def _series_csv(sweep: Sweep, axes: list[str], points: dict[int, list[SweepRun]]
             rows.append([p, *cells, step, time,
                          *(x for o in sweep.series
                            for x in (mean[o][t], None if sd[o] is None else sd[o][t]))])
-    return _csv(header, rows)
+    return csv_text(header, rows)
 
 
 def read_table(out_dir: Path, fmt: Literal["csv", "json"] = "csv",
-               name: Literal["table", "runs", "series"] = "table") -> bytes | dict[str, Any]:
+               name: Literal["table", "runs", "series", "sensitivity"] = "table"
+               ) -> bytes | dict[str, Any]:
     """A table of a sweep folder: the CSV bytes, or {"columns": [...], "data": [[...]]}
     with typed cells (numbers, axis values as in the sweep file, null for empty cells;
     `pandas.DataFrame(**obj)` builds the frame). FileNotFoundError before it is written."""
@@ -111,20 +137,26 @@ def read_table(out_dir: Path, fmt: Literal["csv", "json"] = "csv",
     sweep = json.loads((Path(out_dir) / SWEEP_FILE).read_text())["sweep"]
     axis_values = {a["path"]: a["values"] for ax in sweep["axes"]
                    for a in ax.get("zip", [ax])}
+    integers = set((sweep.get("design") or {}).get("integer", []))
     reader = csv.reader(io.StringIO(raw.decode()))
     columns = next(reader)
-    parse = [_cell_parser(c, axis_values.get(c)) for c in columns]
+    if name == "sensitivity":
+        parse = [str if c == "parameter" else _cell_parser(c, None, c.startswith("points"))
+                 for c in columns]
+    else:
+        parse = [_cell_parser(c, axis_values.get(c), c in integers) for c in columns]
     return {"columns": columns,
             "data": [[f(cell) for f, cell in zip(parse, row, strict=True)] for row in reader]}
 
 
-def _cell_parser(column: str, values: list[Any] | None):
+def _cell_parser(column: str, values: list[Any] | None, integer: bool = False):
     if values is not None:  # an axis: map the written text back to the sweep's value
         lookup = {_axis_cell(v): v for v in values}
         return lambda cell: lookup.get(cell, cell)
     if column == "status":
         return str
-    if column in ("run", "point", "replica", "seed", "step") or column.endswith("_count"):
+    if integer or column in ("run", "point", "replica", "seed", "step") or column.endswith(
+            "_count"):
         return lambda cell: int(cell) if cell else None
     return lambda cell: float(cell) if cell else None
 
@@ -144,7 +176,8 @@ def _num(value: Any) -> str:
     return repr(v) if math.isfinite(v) else ""
 
 
-def _csv(header: list[str], rows: list[list[Any]]) -> str:
+def csv_text(header: list[str], rows: list[list[Any]]) -> str:
+    """One header row, then the rows (cells as _num writes them: empty for None/NaN)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)

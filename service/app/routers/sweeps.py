@@ -240,3 +240,7 @@ _table_route("runs", "The sweep's runs: one row per run",
 _table_route("series", "The sweep's time series averaged over replicas",
              "series.csv: per grid point and observation step, the mean and sd over "
              "replicas of each observable named in the sweep's `series`.")
+_table_route("sensitivity", "The sweep's sensitivity analysis",
+             "sensitivity.csv (a sweep with an `analysis`, once every run has finished): "
+             "per design parameter, Sobol' S1, S1_conf, ST, ST_conf or Morris mu, mu_star, "
+             "sigma, mu_star_conf, then points and points_missing.")
