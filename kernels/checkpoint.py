@@ -20,6 +20,7 @@ import numpy as np
 # under another value is refused, since its continuation would not be the run it began.
 ENGINE_BITS = "2025.1"
 STEP = "driver/step"  # the key of the step a checkpoint was taken at
+PATH, BACKEND = "driver/path", "driver/backend"  # the schedule and backend that ran
 
 State = Mapping[str, np.ndarray]
 # (step, state): called by the driver at each checkpoint; the state holds STEP.

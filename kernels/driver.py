@@ -22,7 +22,7 @@ import numpy as np
 
 from flocklab.schemas import Scenario
 
-from .checkpoint import STEP, CheckpointFn, State
+from .checkpoint import BACKEND, PATH, STEP, CheckpointFn, CheckpointMismatch, State
 from .checks import run_checks, time_to_converge
 from .live import OBSERVATIONS_INTERVAL, ObservationFeed, ObservationsFn
 from .replicas import Replicas
@@ -78,6 +78,10 @@ class _Run:
         self.batch = make(scenarios)
         self.start = 0
         if resume is not None:
+            for key, now in ((PATH, path), (BACKEND, backend)):
+                if str(resume[key]) != now:
+                    raise CheckpointMismatch(f"the checkpoint ran on {key.split('/')[1]} "
+                                             f"{str(resume[key])!r}, this run on {now!r}")
             self.batch.load(resume)
             self.start = int(resume[STEP])
         self.setup = time.perf_counter() - self.t0
@@ -131,7 +135,8 @@ class _Run:
         if not due or s == self.start or self.batch.divergence(0, self.batch.status()):
             return last
         assert self.hooks.on_checkpoint is not None
-        self.hooks.on_checkpoint(s, {**self.batch.save(), STEP: np.array(s, np.int64)})
+        self.hooks.on_checkpoint(s, {**self.batch.save(), STEP: np.array(s, np.int64),
+                                     PATH: np.array(self.path), BACKEND: np.array(self.backend)})
         return time.perf_counter()
 
     def drive(self) -> None:
