@@ -100,6 +100,8 @@ class _Run:
         on = hooks.on_checkpoint is not None and len(scenarios) == 1
         self.ckpt_every = rec.checkpoint_every if on else 0
         self.ckpt_seconds = rec.checkpoint_seconds if on else None
+        if self.ckpt_every or self.ckpt_seconds is not None:
+            self.batch.save()  # a schedule without checkpoints refuses here, not midway
 
     def record(self, step: int, last: bool = False) -> None:
         """Frames due at `step` (every k steps and at each replica's end; `last`: the

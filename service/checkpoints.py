@@ -140,39 +140,58 @@ def hold_lock(folder: Path) -> IO[bytes]:
 
 class FrameStore:
     """A `FrameSink` keeping each frame as `frames/<index>.npz` (step, time, arrays);
-    `seal()` makes the frames so far durable and returns their count, and `replay` hands
-    the first `count` to the trajectory writer."""
+    `seal()` makes the frames so far durable and returns their count and `chain`, a hash
+    chained over every frame's `payload_hash` (the checkpoint keeps both, so a frame
+    file lost, damaged or from another run is refused on resume); `replay` hands them
+    to the trajectory writer."""
 
-    def __init__(self, folder: Path, count: int = 0):
+    def __init__(self, folder: Path, count: int = 0, chain: str = ""):
         self.dir = folder / FRAMES
         self.dir.mkdir(exist_ok=True)
-        self.count = count
         for extra in self.dir.glob("*.npz"):  # frames after the checkpoint's: redone
             if not extra.stem.isdigit() or int(extra.stem) >= count:
                 extra.unlink()
+        self.count, self.chain = 0, ""
+        for i in range(count):
+            try:
+                self._link(self._read(i))
+            except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+                break
+        if (self.count, self.chain) != (count, chain):
+            raise CheckpointRefused(f"{self.dir} does not hold the {count} frames its "
+                                    "checkpoint counts (lost, damaged or another run's)")
         self._unsynced: list[Path] = []
+
+    def _read(self, i: int) -> dict[str, np.ndarray]:
+        with np.load(self._path(i), allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+
+    def _link(self, frame: dict[str, np.ndarray]) -> None:
+        self.chain = hashlib.sha256((self.chain + payload_hash(frame)).encode()).hexdigest()
+        self.count += 1
 
     def _path(self, i: int) -> Path:
         return self.dir / f"{i:08d}.npz"
 
     def frame(self, step: int, time: float, arrays: dict[str, np.ndarray]) -> None:
         path = self._path(self.count)
-        np.savez(path, __step__=np.int64(step), __time__=np.float64(time), **arrays)
+        frame = {"__step__": np.int64(step), "__time__": np.float64(time), **arrays}
+        np.savez(path, **frame)
         self._unsynced.append(path)
-        self.count += 1
+        self._link({k: np.asarray(v) for k, v in frame.items()})
 
-    def seal(self) -> int:
-        """fsync the frames written since the last seal; the count of frames on disk."""
+    def seal(self) -> dict[str, Any]:
+        """fsync the frames written since the last seal; their count and chain."""
         for path in self._unsynced:
             with open(path, "rb") as fh:
                 os.fsync(fh.fileno())
         if self._unsynced:
             fsync_dir(self.dir)
         self._unsynced.clear()
-        return self.count
+        return {"frames": self.count, "frames_chain": self.chain}
 
     def replay(self, writer: H5MDWriter) -> None:
         for i in range(self.count):
-            with np.load(self._path(i), allow_pickle=False) as z:
-                arrays = {k: z[k] for k in z.files if k not in ("__step__", "__time__")}
-                writer.frame(int(z["__step__"]), float(z["__time__"]), arrays)
+            frame = self._read(i)
+            step, time = int(frame.pop("__step__")), float(frame.pop("__time__"))
+            writer.frame(step, time, frame)

@@ -138,6 +138,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if args.backend:
             scenario = scenario.model_copy(update={"backend": args.backend})
     from flocklab.kernels import BackendUnavailable, PathUnavailable
+    from flocklab.kernels.checkpoint import CheckpointUnsupported
     from flocklab.kernels.checks import warnings as check_warnings
 
     from .checkpoints import CheckpointRefused
@@ -159,6 +160,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                 )
     except CheckpointRefused as exc:
         raise BadInput(f"cannot resume: {exc}") from exc
+    except CheckpointUnsupported as exc:
+        raise BadInput(f"recording.checkpoint_every: {exc}") from exc
     except FileExistsError as exc:
         raise BadInput(f"{exc}; pass --overwrite to replace it") from exc
     except PathUnavailable as exc:

@@ -38,6 +38,7 @@ from flocklab.schemas import Scenario
 
 from .checkpoints import (
     CHECKPOINT,
+    FRAMES,
     LOCK,
     CheckpointRefused,
     FrameStore,
@@ -117,8 +118,8 @@ def resume_dir(
     uninterrupted, bit for bit, plus `resumed_from_step` in the summary. Raises
     CheckpointRefused (service/checkpoints.py) when there is nothing to resume exactly."""
     out_dir = Path(out_dir)
-    tmp, scenario, lock, meta, state = _resumable(out_dir)
-    return _run_in(tmp, out_dir, scenario, lock, (meta, state), path=meta["path"],
+    tmp, scenario, lock, meta, state, frames = _resumable(out_dir)
+    return _run_in(tmp, out_dir, scenario, lock, (meta, state, frames), path=meta["path"],
                    on_progress=on_progress, should_stop=should_stop, on_result=on_result,
                    stopped_status=stopped_status)
 
@@ -128,10 +129,11 @@ def _partial(out_dir: Path) -> Path:
 
 
 def _resumable(out_dir: Path) -> tuple[Path, Scenario, IO[bytes], dict[str, Any],
-                                         dict[str, np.ndarray]]:
-    """(folder to go on in, its scenario, the folder's lock, the checkpoint's fingerprint
-    and state): the newest hidden folder with a checkpoint, else `out_dir` itself when
-    it landed stopped with one (moved back to a hidden folder)."""
+                                         dict[str, np.ndarray], FrameStore]:
+    """(folder to go on in, its scenario, the folder's lock, the checkpoint's fingerprint,
+    state and frames): the newest hidden folder with a checkpoint, else `out_dir` itself
+    when it landed stopped with one (then moved back to a hidden folder, once every
+    check passed)."""
     partials = sorted((p for p in out_dir.parent.glob(f".{out_dir.name}.partial-*")
                        if (p / CHECKPOINT).exists()),
                       key=lambda p: (p / CHECKPOINT).stat().st_mtime)
@@ -160,6 +162,7 @@ def _resumable(out_dir: Path) -> tuple[Path, Scenario, IO[bytes], dict[str, Any]
             raise CheckpointRefused(f"{src / CHECKPOINT} ran on backend {meta['backend']!r}, "
                                     f"which this machine does not start for "
                                     f"{scenario.backend!r}: its bits would differ")
+        frames = FrameStore(src, meta["frames"], meta["frames_chain"])
         if src == out_dir:  # landed stopped: back to a hidden folder, its results redone
             lock.close()
             tmp = _partial(out_dir)
@@ -168,14 +171,16 @@ def _resumable(out_dir: Path) -> tuple[Path, Scenario, IO[bytes], dict[str, Any]
             for name in ("summary.json", "observables.csv", "trajectory.h5"):
                 (tmp / name).unlink(missing_ok=True)
             src = tmp
+            frames.dir = tmp / FRAMES
     except BaseException:
         lock.close()
         raise
-    return src, scenario, lock, meta, state
+    return src, scenario, lock, meta, state, frames
 
 
 def _run_in(tmp: Path, out_dir: Path, scenario: Scenario, lock: IO[bytes] | None,
-            resume: tuple[dict[str, Any], dict[str, np.ndarray]] | None, *, path: str,
+            resume: tuple[dict[str, Any], dict[str, np.ndarray], FrameStore] | None, *,
+            path: str,
             on_progress: Callable[[int, int], None] | None,
             should_stop: Callable[[], bool] | None,
             on_result: Callable[[RunResult], None] | None,
@@ -194,14 +199,14 @@ def _run_in(tmp: Path, out_dir: Path, scenario: Scenario, lock: IO[bytes] | None
     try:
         frames = None
         if scenario.recording.checkpoints:
-            frames = FrameStore(tmp, resume[0]["frames"] if resume else 0)
+            frames = resume[2] if resume else FrameStore(tmp)
 
         def on_checkpoint(step: int, state: dict[str, np.ndarray]) -> None:
             assert frames is not None
             from flocklab.kernels.checkpoint import BACKEND, PATH
 
             write_checkpoint(tmp, scenario, step, state,
-                             {"frames": frames.seal(), "path": str(state[PATH]),
+                             {**frames.seal(), "path": str(state[PATH]),
                               "backend": str(state[BACKEND])})
 
         writer = H5MDWriter(tmp / "trajectory.h5", scenario) if frames is None else None
