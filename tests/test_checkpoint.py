@@ -30,10 +30,10 @@ TIMINGS = {"wall_seconds", "agent_steps_per_second", "setup_seconds", "resumed_f
 
 
 def vicsek(rule: str = "vicsek", n: int = 300, steps: int = 400, every: int = 50,
-           seed: int = 7) -> dict:
+           seed: int = 7, density: float = 2.0) -> dict:
     return {
         "model": {"kind": "vicsek", "rule": rule, "v0": 0.1, "eta": 1.0},
-        "space": {"kind": "periodic", "L": (n / 2) ** 0.5},
+        "space": {"kind": "periodic", "L": (n / density) ** 0.5},
         "neighbours": {"radius": 1.0}, "initial": {"kind": "random", "N": n},
         "time": {"steps": steps, "dt": 1.0},
         "recording": {"every": 30, "arrays": ["position", "heading"],
@@ -116,8 +116,10 @@ def kill_and_resume(scenario: Path, out: Path, path: str, seed: int, kills: int)
 
 CASES = {
     "vicsek-fused": (vicsek(n=2000, steps=4000, every=250), "fused"),
-    # the rule "average" tracks Theorem 2's linked intervals (an accumulator to carry)
-    "vicsek-average-per_step": (vicsek("average", n=400, steps=900, every=60), "per_step"),
+    # The rule "average" tracks Theorem 2's linked intervals: at density 1 an interval
+    # spans tens of steps, so a checkpoint falls inside one (a forest to carry over).
+    "vicsek-average-per_step": (vicsek("average", n=400, steps=900, every=60, density=1.0),
+                                "per_step"),
     "flocking-fused": (flocking(2500, 200), "fused"),
     "flocking-per_step": (flocking(2500, 200), "per_step"),
 }
@@ -142,26 +144,30 @@ def test_kill_9_at_random_moments_then_resume_is_bit_identical(tmp_path, case):
     assert not list(tmp_path.glob(".killed.partial-*"))
 
 
-def stopped_run(tmp: Path, data: dict, name: str = "run") -> Path:
+def stopped_run(tmp: Path, data: dict, name: str = "run", path: str = "auto") -> Path:
     """A run stopped (as by Ctrl-C) once its first checkpoint is on disk."""
     out = tmp / name
-    execute_to_dir(Scenario.model_validate(data), out, stopped_status="interrupted",
+    execute_to_dir(Scenario.model_validate(data), out, stopped_status="interrupted", path=path,
                    should_stop=lambda: partial_checkpoint(out) is not None)
     assert json.loads((out / "summary.json").read_text())["status"] == "interrupted"
     assert (out / CHECKPOINT).exists()
     return out
 
 
-def test_a_stopped_run_resumes_to_the_uninterrupted_bits(tmp_path, capsys):
-    data = vicsek(rule="average", n=200, steps=300, every=40)
+@pytest.mark.parametrize("path", ["fused", "per_step"])
+def test_a_stopped_run_resumes_to_the_uninterrupted_bits(tmp_path, capsys, path):
+    # Theorem 2's intervals at density 1 span tens of steps: the one open at the
+    # checkpoint (step 40) goes on after it.
+    data = vicsek(rule="average", n=200, steps=300, every=40, density=1.0)
     ref = tmp_path / "ref"
-    execute_to_dir(Scenario.model_validate(data), ref)
-    out = stopped_run(tmp_path, data)
+    execute_to_dir(Scenario.model_validate(data), ref, path=path)
+    out = stopped_run(tmp_path, data, path=path)
     assert cli.main(["run", "--resume", str(out), "--quiet"]) == 0
     line = json.loads(capsys.readouterr().out)
     assert line["status"] == "completed" and line["resumed_from_step"] == 40
     assert_same_run(ref, out)
-    assert json.loads((out / "summary.json").read_text())["linked_intervals"]["count"] > 0
+    linked = json.loads((out / "summary.json").read_text())["linked_intervals"]
+    assert linked["count"] > 0 and linked["longest_steps"] > 40
     # Finished: nothing left to resume.
     assert cli.main(["run", "--resume", str(out)]) == 2
     assert "nothing to resume" in capsys.readouterr().err
