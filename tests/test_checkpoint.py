@@ -118,7 +118,7 @@ CASES = {
     "vicsek-fused": (vicsek(n=2000, steps=4000, every=250), "fused"),
     # The rule "average" tracks Theorem 2's linked intervals: at density 1 an interval
     # spans tens of steps, so a checkpoint falls inside one (a forest to carry over).
-    "vicsek-average-per_step": (vicsek("average", n=400, steps=900, every=60, density=1.0),
+    "vicsek-average-per_step": (vicsek("average", n=400, steps=2500, every=150, density=1.0),
                                 "per_step"),
     "flocking-fused": (flocking(2500, 200), "fused"),
     "flocking-per_step": (flocking(2500, 200), "per_step"),
