@@ -4,7 +4,10 @@ It observes nothing itself: the schedule observes inside `advance` (kernels/repl
 The driver picks the windows, each ending at the next frame to record or after about
 `WINDOW_SECONDS` of work (the first window is `WINDOW_AGENT_STEPS` agent-steps, or the
 schedule's `FIRST_WINDOW`; later ones are sized from the measured rate), so progress, live
-observations and cancellation are polled about ten times a second. It records the frames
+observations and cancellation are polled about ten times a second. A run with checkpoints
+(`recording.checkpoint_every`, `checkpoint_seconds`, and a caller's `on_checkpoint`) also
+ends a window at every k-th step, and hands the schedule's saved state over at a window's
+end when k steps or the seconds are up; `resume` starts from such a state. It records the frames
 and assembles each replica's `RunResult` (status, divergence, convergence times, the
 papers' checks). Window boundaries never change a bit of any replica.
 """
@@ -19,6 +22,7 @@ import numpy as np
 
 from flocklab.schemas import Scenario
 
+from .checkpoint import BACKEND, PATH, STEP, CheckpointFn, CheckpointMismatch, State
 from .checks import run_checks, time_to_converge
 from .live import OBSERVATIONS_INTERVAL, ObservationFeed, ObservationsFn
 from .replicas import Replicas
@@ -40,13 +44,17 @@ class Hooks:
     should_stop: StopFn | None = None
     on_observations: ObservationsFn | None = None  # a single replica only
     observations_interval: float = OBSERVATIONS_INTERVAL
+    on_checkpoint: CheckpointFn | None = None  # a single replica only
 
 
 def run_replicas(make: Callable[[list[Scenario]], Replicas], scenarios: Sequence[Scenario],
                  *, path: str, backend: str, sinks: Sequence[FrameSink | None] | None = None,
-                 hooks: Hooks | None = None) -> list[RunResult]:
+                 hooks: Hooks | None = None, resume: State | None = None
+                 ) -> list[RunResult]:
     """Run `scenarios` on the schedule `make` builds (named `path`) to the end, to
-    cancellation or to blow-up; results in input order."""
+    cancellation or to blow-up; results in input order. `resume`: a single replica's
+    checkpoint (`Replicas.save` plus its step), from which the run goes on; the frames up
+    to that step are the sink's already."""
     sinks = list(sinks) if sinks is not None else [None] * len(scenarios)
     # From a queue, the largest replicas first: every window then ends on a small one
     # instead of leaving one core alone with a large one. A replica's bits do not depend
@@ -55,7 +63,7 @@ def run_replicas(make: Callable[[list[Scenario]], Replicas], scenarios: Sequence
     if getattr(make, "QUEUED", False):
         order.sort(key=lambda b: -scenarios[b].n_agents)
     results = _Run(make, [scenarios[b] for b in order], [sinks[b] for b in order], path,
-                   backend, hooks or Hooks()).results()
+                   backend, hooks or Hooks(), resume).results()
     place = {b: j for j, b in enumerate(order)}
     return [results[place[b]] for b in range(len(scenarios))]
 
@@ -64,9 +72,18 @@ class _Run:
     """One driven set of replicas, in launch order."""
 
     def __init__(self, make: Callable[[list[Scenario]], Replicas], scenarios: list[Scenario],
-                 sinks: list[FrameSink | None], path: str, backend: str, hooks: Hooks):
+                 sinks: list[FrameSink | None], path: str, backend: str, hooks: Hooks,
+                 resume: State | None = None):
         self.t0 = time.perf_counter()
         self.batch = make(scenarios)
+        self.start = 0
+        if resume is not None:
+            for key, now in ((PATH, path), (BACKEND, backend)):
+                if str(resume[key]) != now:
+                    raise CheckpointMismatch(f"the checkpoint ran on {key.split('/')[1]} "
+                                             f"{str(resume[key])!r}, this run on {now!r}")
+            self.batch.load(resume)
+            self.start = int(resume[STEP])
         self.setup = time.perf_counter() - self.t0
         self.scenarios, self.sinks, self.path, self.backend = scenarios, sinks, path, backend
         self.hooks = hooks
@@ -79,6 +96,12 @@ class _Run:
                          for a, s in zip(self.arrays, scenarios, strict=True)]
         self.cancelled = False
         self.s = 0
+        rec = scenarios[0].recording
+        on = hooks.on_checkpoint is not None and len(scenarios) == 1
+        self.ckpt_every = rec.checkpoint_every if on else 0
+        self.ckpt_seconds = rec.checkpoint_seconds if on else None
+        if self.ckpt_every or self.ckpt_seconds is not None:
+            self.batch.save()  # a schedule without checkpoints refuses here, not midway
 
     def record(self, step: int, last: bool = False) -> None:
         """Frames due at `step` (every k steps and at each replica's end; `last`: the
@@ -101,7 +124,22 @@ class _Run:
         for b, k in enumerate(self.frame_every):
             if k and s < self.steps[b]:
                 nxt = min(nxt, (s // k + 1) * k, self.steps[b])
+        if self.ckpt_every:
+            nxt = min(nxt, (s // self.ckpt_every + 1) * self.ckpt_every)
         return nxt
+
+    def checkpoint(self, s: int, now: float, last: float) -> float:
+        """Hand the state at s (a window's end) to `on_checkpoint` when due: at every
+        k-th step, or `checkpoint_seconds` after the last one. Returns when the last one
+        was taken. A diverged replica is not checkpointed (its end is already known)."""
+        due = (self.ckpt_every and s % self.ckpt_every == 0) or (
+            self.ckpt_seconds is not None and now - last >= self.ckpt_seconds)
+        if not due or s == self.start or self.batch.divergence(0, self.batch.status()):
+            return last
+        assert self.hooks.on_checkpoint is not None
+        self.hooks.on_checkpoint(s, {**self.batch.save(), STEP: np.array(s, np.int64),
+                                     PATH: np.array(self.path), BACKEND: np.array(self.backend)})
+        return time.perf_counter()
 
     def drive(self) -> None:
         """Windows to the last replica's end (or to cancellation)."""
@@ -112,8 +150,10 @@ class _Run:
         # The schedule's series are already the result's columns: nothing to filter.
         feed = (ObservationFeed(hooks.on_observations, None, hooks.observations_interval)
                 if hooks.on_observations is not None and len(self.scenarios) == 1 else None)
-        self.record(0)
-        s, last_progress = 0, time.perf_counter()
+        if self.start == 0:
+            self.record(0)
+        s, last_progress = self.start, time.perf_counter()
+        last_ckpt = last_progress
         while s <= last:
             nxt = self.next_stop(s, window, last)
             started = time.perf_counter()
@@ -126,6 +166,8 @@ class _Run:
             if s > last:
                 break
             now = time.perf_counter()
+            if self.ckpt_every or self.ckpt_seconds is not None:
+                last_ckpt = self.checkpoint(s, now, last_ckpt)
             if hooks.on_progress is not None and now - last_progress >= PROGRESS_INTERVAL:
                 last_progress = now
                 hooks.on_progress(min(s, last), last)

@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from flocklab.schemas import Scenario
 
 from . import runtime
+from .checkpoint import CheckpointFn, State
 from .driver import Hooks, ProgressFn, StopFn, run_replicas
 from .live import OBSERVATIONS_INTERVAL, ObservationsFn
 from .model import kernel_for
@@ -46,6 +47,8 @@ def run(
     should_stop: StopFn | None = None,
     on_observations: ObservationsFn | None = None,
     observations_interval: float = OBSERVATIONS_INTERVAL,
+    on_checkpoint: CheckpointFn | None = None,
+    resume: State | None = None,
 ) -> RunResult:
     """Run `scenario` to the end, to cancellation, or to numerical blow-up.
 
@@ -56,13 +59,17 @@ def run(
     returns status "diverged" with the step and likely cause; what was recorded before it
     is kept. `on_observations` gets the observation rows computed so far while the run goes
     on, in batches at most every `observations_interval` seconds (see kernels/live.py); the
-    result's `observables` hold them all.
+    result's `observables` hold them all. With `recording.checkpoint_every` (or
+    `checkpoint_seconds`), `on_checkpoint(step, state)` gets the whole state at those
+    steps (kernels/checkpoint.py); `resume=state` continues a run from one, on the same
+    schedule, to the bits the run would have had uninterrupted.
     """
     rt = runtime.ensure(scenario.backend, scenario.threads, scenario.precision)
     name, make = schedule(scenario, rt.backend, path)
-    hooks = Hooks(on_progress, should_stop, on_observations, observations_interval)
+    hooks = Hooks(on_progress, should_stop, on_observations, observations_interval,
+                  on_checkpoint if scenario.recording.checkpoints else None)
     return run_replicas(make, [scenario], path=name, backend=rt.backend, sinks=[sink],
-                        hooks=hooks)[0]
+                        hooks=hooks, resume=resume)[0]
 
 
 def _uncovered(scenario: Scenario, backend: str, path: str) -> str | None:

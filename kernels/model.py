@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import importlib
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
 
 from flocklab.schemas import Scenario
 
+from .checkpoint import CheckpointUnsupported
 from .runtime import DevicePolicy
 
 
@@ -57,6 +59,16 @@ class ModelKernel(ABC):
         trajectory unchanged. The schema refuses a name the model does not list in its
         `derived_arrays`, so a model without any never gets here."""
         raise NotImplementedError(f"model {self.kind} records no derived arrays")
+
+    def save(self) -> dict[str, np.ndarray]:
+        """Everything the next `step` and `observe` read, as named arrays (checkpoints,
+        kernels/checkpoint.py); `load` puts it back into a kernel built from the same
+        scenario. A model that does not implement them has no checkpoints."""
+        raise CheckpointUnsupported(f"model {self.kind!r} saves no checkpoints on the "
+                                    "per-step schedule")
+
+    def load(self, state: Mapping[str, np.ndarray]) -> None:
+        raise CheckpointUnsupported(f"model {self.kind!r} loads no checkpoints")
 
     def convergence_keys(self) -> list[str]:
         """Observables that go to zero on convergence (time-to-converge is reported)."""

@@ -9,6 +9,7 @@ step. A `SimulationDiverged` from a step or an observation ends the replica ther
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -16,6 +17,7 @@ import numpy as np
 from flocklab.schemas import Scenario
 
 from . import runtime
+from .checkpoint import CheckpointUnsupported
 from .model import ModelKernel, kernel_for
 from .result import SimulationDiverged
 
@@ -89,6 +91,24 @@ class PerStep:
         if derived:
             values.update(self.model.derived_arrays(step, derived))
         return values
+
+    def save(self) -> dict[str, np.ndarray]:
+        """The counters, the series so far (their names in order) and the model's state."""
+        if self.error is not None:
+            raise CheckpointUnsupported("a diverged replica is not checkpointed")
+        keys = list(self.series)
+        return {"per_step/counters": np.array([self.done, self.observed, self.end], np.int64),
+                "per_step/series": np.array(keys),
+                **{f"series/{k}": np.asarray(self.series[k], np.float64) for k in keys},
+                **{f"model/{k}": v for k, v in self.model.save().items()}}
+
+    def load(self, state: Mapping[str, np.ndarray]) -> None:
+        self.done, self.observed, self.end = (int(v) for v in state["per_step/counters"])
+        # Python floats again: the series' values as `observe` gave them, bit for bit.
+        self.series = {str(k): state[f"series/{k}"].tolist() for k in state["per_step/series"]}
+        self.series["step"] = [int(s) for s in self.series["step"]]
+        self.model.load({k.removeprefix("model/"): v for k, v in state.items()
+                         if k.startswith("model/")})
 
     def convergence_keys(self) -> list[str]:
         return self.model.convergence_keys()

@@ -11,12 +11,14 @@ per-replica integer slots; `Snapshots`: a buffer for host-side observables; `hos
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Protocol
 
 import numpy as np
 
 from flocklab.schemas import Scenario
+
+from .checkpoint import CheckpointUnsupported, put
 
 
 class Replicas(Protocol):
@@ -39,6 +41,11 @@ recording names (`recording.derived`) where the schedule computes them."""
     def convergence_keys(self) -> list[str]: ...
     def extra(self, b: int, status: np.ndarray) -> dict[str, Any]: ...
     def divergence(self, b: int, status: np.ndarray) -> tuple[int, str, str] | None: ...
+    # Checkpoints (kernels/checkpoint.py): the whole state the next step reads, and back
+    # into a set freshly built from the same scenarios. save raises CheckpointUnsupported
+    # where the schedule cannot save it exactly.
+    def save(self) -> dict[str, np.ndarray]: ...
+    def load(self, state: Mapping[str, np.ndarray]) -> None: ...
 
 
 def host_array(a: np.ndarray, dtype: Any) -> np.ndarray:
@@ -135,6 +142,33 @@ class FusedBatch:
     def invalidate(self) -> None:
         """Forget the copies: the device arrays are about to change."""
         self.__dict__.get("_host_copies", {}).clear()
+
+    # Whether every bit the next window reads is in `args` and `save_host` (a model's
+    # batch says so once its host-side state is saved too).
+    CHECKPOINTS = False
+
+    def save(self) -> dict[str, np.ndarray]:
+        """Every array of `args` (the state, the counters and slots, the observation rows
+        and the scratch, which the next window overwrites: saving it too costs little at
+        the fused schedule's N and keeps the rule simple), and `save_host`'s arrays."""
+        if not self.CHECKPOINTS:
+            raise CheckpointUnsupported(f"the {type(self).__name__} schedule saves no "
+                                        "checkpoints (take path per_step)")
+        return {**{f"args/{k}": _copy(v) for k, v in self.args.items()}, **self.save_host()}
+
+    def load(self, state: Mapping[str, np.ndarray]) -> None:
+        """Back into this batch, built from the same scenarios as the saved one."""
+        self.invalidate()
+        for k, held in self.args.items():
+            put(held, f"args/{k}", state[f"args/{k}"])
+        self.load_host(state)
+
+    def save_host(self) -> dict[str, np.ndarray]:
+        """What a batch keeps on the host across windows (none here)."""
+        return {}
+
+    def load_host(self, state: Mapping[str, np.ndarray]) -> None:
+        """Back from `save_host`'s arrays."""
 
 
 def _copy(a: Any) -> np.ndarray:

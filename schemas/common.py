@@ -270,10 +270,24 @@ class Recording(Strict):
         "level 4 with HDF5's shuffle filter, which every HDF5 reader decodes): smaller "
         "files, slower writes and reads.",
     )
+    checkpoint_every: NonNegativeInt = Field(
+        default=0, le=MAX_STEPS, description="Write a checkpoint every k steps (0: none) "
+        "into the run folder, from which `flocklab run --resume` continues bit for bit "
+        "(docs/CHECKPOINTS.md).",
+    )
+    checkpoint_seconds: PositiveReal | None = Field(
+        default=None, description="Also write a checkpoint whenever this many seconds of "
+        "wall-clock time have passed since the last one (null: by steps only).",
+    )
 
     @property
     def enabled(self) -> bool:
         return self.every > 0
+
+    @property
+    def checkpoints(self) -> bool:
+        """Whether the run writes checkpoints (by steps, by wall-clock time or both)."""
+        return self.checkpoint_every > 0 or self.checkpoint_seconds is not None
 
     @property
     def derived(self) -> list[str]:

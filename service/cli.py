@@ -124,22 +124,44 @@ def load_sweep_source(source: str) -> Sweep:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    scenario = load_scenario(args.scenario, args.set or ())
-    if args.backend:
-        scenario = scenario.model_copy(update={"backend": args.backend})
+    if args.resume is not None:
+        if (args.out is not None or args.set or args.backend or args.overwrite
+                or args.path != "auto" or args.scenario is not None):
+            raise BadInput("--resume DIR takes the scenario, backend and path from the run "
+                           "folder: give it alone (with --quiet at most)")
+        args.out = args.resume
+        scenario = None
+    elif args.out is None:
+        raise BadInput("run needs --out DIR (or --resume DIR)")
+    else:
+        scenario = load_scenario(args.scenario or f"preset:{DEFAULT_PRESET}", args.set or ())
+        if args.backend:
+            scenario = scenario.model_copy(update={"backend": args.backend})
     from flocklab.kernels import BackendUnavailable, PathUnavailable
+    from flocklab.kernels.checkpoint import CheckpointUnsupported
     from flocklab.kernels.checks import warnings as check_warnings
 
-    from .execute import execute_to_dir
+    from .checkpoints import CheckpointRefused
+    from .execute import execute_to_dir, resume_dir
 
     show = sys.stderr.isatty() and not args.quiet
     stop = _StopOnInterrupt()  # Ctrl-C stops between steps; what was computed is kept
     try:
         with stop:
-            summary = execute_to_dir(
-                scenario, Path(args.out), on_progress=ProgressBar(show), should_stop=stop,
-                overwrite=args.overwrite, stopped_status="interrupted", path=args.path,
-            )
+            if scenario is None:
+                summary = resume_dir(Path(args.resume), on_progress=ProgressBar(show),
+                                     should_stop=stop, stopped_status="interrupted")
+                scenario = load_scenario(str(Path(args.resume) / "scenario.json"))
+            else:
+                summary = execute_to_dir(
+                    scenario, Path(args.out), on_progress=ProgressBar(show),
+                    should_stop=stop, overwrite=args.overwrite,
+                    stopped_status="interrupted", path=args.path,
+                )
+    except CheckpointRefused as exc:
+        raise BadInput(f"cannot resume: {exc}") from exc
+    except CheckpointUnsupported as exc:
+        raise BadInput(f"recording.checkpoint_every: {exc}") from exc
     except FileExistsError as exc:
         raise BadInput(f"{exc}; pass --overwrite to replace it") from exc
     except PathUnavailable as exc:
@@ -149,6 +171,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_BACKEND
     brief = {k: summary[k] for k in ("status", "backend", "steps", "wall_seconds",
                                      "agent_steps_per_second")}
+    if "resumed_from_step" in summary:
+        brief["resumed_from_step"] = summary["resumed_from_step"]
     print(json.dumps({"out": str(args.out), **brief}))
     for line in check_warnings(summary.get("checks", {})):
         print(f"flocklab: warning: {line}", file=sys.stderr)
@@ -159,6 +183,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"flocklab: interrupted at step {summary['steps']} of {scenario.time.steps}: "
               f"the {summary['frames']} frame(s) and the observables so far are in "
               f"{args.out} (status interrupted)", file=sys.stderr)
+        if (Path(args.out) / "checkpoint.npz").exists():
+            print(f"flocklab: continue it with: flocklab run --resume {args.out}",
+                  file=sys.stderr)
         return EXIT_RUN_FAILED
     return EXIT_OK
 
@@ -327,10 +354,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"flocklab {version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a scenario and write its artifacts to a folder")
-    p.add_argument("scenario", nargs="?", default=f"preset:{DEFAULT_PRESET}",
+    p.add_argument("scenario", nargs="?", default=None,
                    help="scenario JSON file, '-' for stdin, or preset:NAME "
                    f"(default: the embedded preset:{DEFAULT_PRESET})")
-    p.add_argument("--out", required=True, help="output folder (created atomically)")
+    p.add_argument("--out", help="output folder (created atomically)")
+    p.add_argument("--resume", metavar="DIR", help="continue the checkpointed run of the "
+                   "output folder DIR from its latest checkpoint (recording.checkpoint_every;"
+                   " docs/CHECKPOINTS.md), bit for bit")
     p.add_argument("--backend", choices=["cpu", "cuda", "vulkan", "auto"],
                    help="override the scenario's backend")
     p.add_argument("--path", choices=["auto", "per_step", "fused", "batched"], default="auto",

@@ -16,6 +16,10 @@ Ctrl-C gives "interrupted"), with the frames and observables up to the stop.
 While the run goes on, the observation rows computed so far are published in the hidden
 folder's `observables.partial.csv` (service/live_observables.py; deleted once the final
 observables.csv is written), which the service reads for a running job.
+A run with checkpoints (`recording.checkpoint_every`, `checkpoint_seconds`) keeps its
+latest checkpoint and its frames in the hidden folder (service/checkpoints.py), which
+then survives a kill or an exception; `resume_dir` goes on from it. A stopped run lands
+with them, and can be resumed too; a finished one drops them.
 """
 
 from __future__ import annotations
@@ -26,12 +30,23 @@ import shutil
 import uuid
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
 from flocklab.schemas import Scenario
 from flocklab.schemas.version import version
+
+from .checkpoints import (
+    CHECKPOINT,
+    FRAMES,
+    LOCK,
+    CheckpointRefused,
+    FrameStore,
+    hold_lock,
+    read_checkpoint,
+    write_checkpoint,
+)
 
 if TYPE_CHECKING:
     from flocklab.kernels import RunResult
@@ -73,39 +88,164 @@ def execute_to_dir(
     `out_dir`. Returns the summary dict; `on_result` gets the engine's result before the
     folder is moved into place. A run that `should_stop` ended is written with status
     `stopped_status`."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not overwrite and any(out_dir.iterdir()):
+        raise FileExistsError(f"{out_dir} exists and is not empty")
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _partial(out_dir)
+    tmp.mkdir()
+    try:
+        (tmp / "scenario.json").write_text(scenario.model_dump_json(indent=2))
+        lock = hold_lock(tmp) if scenario.recording.checkpoints else None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return _run_in(tmp, out_dir, scenario, lock, None, path=path, on_progress=on_progress,
+                   should_stop=should_stop, on_result=on_result,
+                   stopped_status=stopped_status)
+
+
+def resume_dir(
+    out_dir: Path,
+    *,
+    on_progress: Callable[[int, int], None] | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    on_result: Callable[[RunResult], None] | None = None,
+    stopped_status: str = "cancelled",
+) -> dict[str, Any]:
+    """Continue the checkpointed run of `out_dir` from its latest checkpoint: the one in
+    its hidden folder (a run killed while it went on) or in the folder itself (a run
+    stopped through `should_stop`). Its artifacts are those the run would have written
+    uninterrupted, bit for bit, plus `resumed_from_step` in the summary. Raises
+    CheckpointRefused (service/checkpoints.py) when there is nothing to resume exactly."""
+    out_dir = Path(out_dir)
+    tmp, scenario, lock, meta, state, frames = _resumable(out_dir)
+    return _run_in(tmp, out_dir, scenario, lock, (meta, state, frames), path=meta["path"],
+                   on_progress=on_progress, should_stop=should_stop, on_result=on_result,
+                   stopped_status=stopped_status)
+
+
+def _partial(out_dir: Path) -> Path:
+    return out_dir.parent / f".{out_dir.name}.partial-{uuid.uuid4().hex[:8]}"
+
+
+def _resumable(out_dir: Path) -> tuple[Path, Scenario, IO[bytes], dict[str, Any],
+                                         dict[str, np.ndarray], FrameStore]:
+    """(folder to go on in, its scenario, the folder's lock, the checkpoint's fingerprint,
+    state and frames): the newest hidden folder with a checkpoint, else `out_dir` itself
+    when it landed stopped with one (then moved back to a hidden folder, once every
+    check passed)."""
+    partials = sorted((p for p in out_dir.parent.glob(f".{out_dir.name}.partial-*")
+                       if (p / CHECKPOINT).exists()),
+                      key=lambda p: (p / CHECKPOINT).stat().st_mtime)
+    if partials:
+        src = partials[-1]
+    elif (out_dir / CHECKPOINT).exists():
+        src = out_dir
+    elif (out_dir / "summary.json").exists():
+        status = json.loads((out_dir / "summary.json").read_text()).get("status")
+        raise CheckpointRefused(f"{out_dir}: the run ended ({status}) with no checkpoint "
+                                "left; nothing to resume")
+    else:
+        raise CheckpointRefused(f"{out_dir}: no checkpoint to resume from (neither the "
+                                f"folder nor a hidden .{out_dir.name}.partial-* folder "
+                                f"beside it holds {CHECKPOINT})")
+    try:
+        scenario = Scenario.model_validate_json((src / "scenario.json").read_text())
+    except (OSError, ValueError) as exc:
+        raise CheckpointRefused(f"{src / 'scenario.json'} is unreadable: {exc}") from None
+    lock = hold_lock(src)
+    try:
+        meta, state = read_checkpoint(src, scenario)
+        from flocklab.kernels.runtime import resolve_backend
+
+        if resolve_backend(scenario.backend) != meta["backend"]:
+            raise CheckpointRefused(f"{src / CHECKPOINT} ran on backend {meta['backend']!r}, "
+                                    f"which this machine does not start for "
+                                    f"{scenario.backend!r}: its bits would differ")
+        frames = FrameStore(src, meta["frames"], meta["frames_chain"])
+        if src == out_dir:  # landed stopped: back to a hidden folder, its results redone
+            lock.close()
+            tmp = _partial(out_dir)
+            os.rename(out_dir, tmp)
+            lock = hold_lock(tmp)
+            for name in ("summary.json", "observables.csv", "trajectory.h5"):
+                (tmp / name).unlink(missing_ok=True)
+            src = tmp
+            frames.dir = tmp / FRAMES
+    except BaseException:
+        lock.close()
+        raise
+    return src, scenario, lock, meta, state, frames
+
+
+def _run_in(tmp: Path, out_dir: Path, scenario: Scenario, lock: IO[bytes] | None,
+            resume: tuple[dict[str, Any], dict[str, np.ndarray], FrameStore] | None, *,
+            path: str,
+            on_progress: Callable[[int, int], None] | None,
+            should_stop: Callable[[], bool] | None,
+            on_result: Callable[[RunResult], None] | None,
+            stopped_status: str) -> dict[str, Any]:
+    """Run `scenario` in the hidden folder `tmp` (from `resume`'s checkpoint, if given)
+    and move it into place as `out_dir`. A checkpointed run keeps its frames in a
+    `FrameStore` and writes trajectory.h5 from them at the end; a hidden folder that
+    holds a checkpoint survives an exception, to be resumed."""
     from flocklab import kernels  # the engine: only where a simulation runs
+    from flocklab.kernels.checkpoint import CheckpointMismatch
     from flocklab.kernels.overlays import overlays
 
     from .h5md import H5MDWriter
     from .live_observables import LIVE_FILE, LiveObservables
 
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not overwrite and any(out_dir.iterdir()):
-        raise FileExistsError(f"{out_dir} exists and is not empty")
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_dir.parent / f".{out_dir.name}.partial-{uuid.uuid4().hex[:8]}"
-    tmp.mkdir()
     try:
-        (tmp / "scenario.json").write_text(scenario.model_dump_json(indent=2))
-        writer = H5MDWriter(tmp / "trajectory.h5", scenario)
+        frames = None
+        if scenario.recording.checkpoints:
+            frames = resume[2] if resume else FrameStore(tmp)
+
+        def on_checkpoint(step: int, state: dict[str, np.ndarray]) -> None:
+            assert frames is not None
+            from flocklab.kernels.checkpoint import BACKEND, PATH
+
+            write_checkpoint(tmp, scenario, step, state,
+                             {**frames.seal(), "path": str(state[PATH]),
+                              "backend": str(state[BACKEND])})
+
+        writer = H5MDWriter(tmp / "trajectory.h5", scenario) if frames is None else None
         live = LiveObservables(tmp / LIVE_FILE)
         try:
-            result = kernels.run(
-                scenario, sink=writer, on_progress=on_progress, should_stop=should_stop,
-                on_observations=live.append, path=path,
-            )
+            try:
+                result = kernels.run(
+                    scenario, sink=frames or writer, on_progress=on_progress,
+                    should_stop=should_stop, on_observations=live.append, path=path,
+                    on_checkpoint=on_checkpoint, resume=resume[1] if resume else None,
+                )
+            except CheckpointMismatch as exc:
+                raise CheckpointRefused(f"{tmp / CHECKPOINT} does not fit this run: {exc}"
+                                        ) from None
+            if frames is not None:
+                writer = H5MDWriter(tmp / "trajectory.h5", scenario)
+                frames.replay(writer)
+            assert writer is not None
             writer.write_observables(result.observables)
             writer.write_overlays(overlays(scenario, np.array(writer.frame_times)))
         finally:
-            writer.close()
+            if writer is not None:
+                writer.close()
         write_observables_csv(tmp / "observables.csv", result.observables)
         live.remove()
         summary = run_summary(scenario, result, frames=writer.frames, files=list(ARTIFACTS))
+        if resume is not None:
+            summary["resumed_from_step"] = resume[0]["step"]
         if summary["status"] == "cancelled":
             summary["status"] = stopped_status
+        if frames is not None and result.status != "cancelled":
+            # Done: nothing to resume. A stopped run keeps its checkpoint and frames.
+            (tmp / CHECKPOINT).unlink(missing_ok=True)
+            shutil.rmtree(frames.dir, ignore_errors=True)
         if on_result is not None:
             on_result(result)
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
+        (tmp / LOCK).unlink(missing_ok=True)
         _fsync_dir(tmp)
         if out_dir.exists():
             old = out_dir.parent / f".{out_dir.name}.old-{uuid.uuid4().hex[:8]}"
@@ -116,12 +256,18 @@ def execute_to_dir(
             os.rename(tmp, out_dir)
         return summary
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if not (tmp / CHECKPOINT).exists():
+            shutil.rmtree(tmp, ignore_errors=True)
         raise
+    finally:
+        if lock is not None:
+            lock.close()
 
 
 def _fsync_dir(path: Path) -> None:
     for p in path.iterdir():
+        if p.is_dir():  # frames/: synced as they were sealed
+            continue
         with open(p, "rb") as fh:
             os.fsync(fh.fileno())
     fd = os.open(path, os.O_RDONLY)

@@ -6,11 +6,12 @@ in slot k. Outputs are always given back in agent-id order. `sort(grid, step)` d
 most once per step: a step and the observation of the same state share one sort.
 """
 
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 
 import numpy as np
 import taichi as ti
 
+from ..checkpoint import put
 from ..runtime import as_real
 from .grid import Grid, vector_rows
 
@@ -111,6 +112,20 @@ class SortedState:
 
     def swap(self, name: str) -> None:
         self.cur[name], self._buf[name] = self._buf[name], self.cur[name]
+
+    def save(self) -> dict[str, np.ndarray]:
+        """The arrays in their storage order and the ids: the slot order is part of the
+        state (the next sort is stable, so it starts from this order, and each
+        neighbour sum runs in it)."""
+        return {"ids": self.ids.to_numpy(), **{f"state/{k}": a.to_numpy()
+                                                for k, a in self.cur.items()}}
+
+    def load(self, state: Mapping[str, np.ndarray]) -> None:
+        """Back from `save`'s arrays (same names and shapes); the next `sort` rebuilds."""
+        put(self.ids, "ids", state["ids"])
+        for k, a in self.cur.items():
+            put(a, f"state/{k}", state[f"state/{k}"])
+        self.forget_sort()
 
     def ids_numpy(self) -> np.ndarray:
         return self.ids.to_numpy()

@@ -1076,6 +1076,14 @@ class FlockingBatch(FusedBatch):
         )
         self._order = list(self.args)
 
+    CHECKPOINTS = True  # `args` and lambda_2's rows (`save_host`) are the whole state
+
+    def save_host(self) -> dict[str, np.ndarray]:
+        return {f"lambda2/{b}": lam.copy() for b, lam in enumerate(self.lam)}
+
+    def load_host(self, state) -> None:
+        self.lam = [state[f"lambda2/{b}"].copy() for b in range(self.B)]
+
     def advance(self, s0: int, s1: int) -> None:
         """Advance every replica from step s0 towards s1 (each stops at its own end), in
         launches of at most `chunk` steps while lambda_2 snapshots are taken."""

@@ -20,6 +20,7 @@ or metric neighbours), the neighbourhood radius (radius.py) and the mission term
 flock with per-agent radii under eq. 4 and paper 002's navigation function.
 """
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -339,6 +340,25 @@ class Flock(ModelKernel):
             elif "heading" in arrays:
                 out["heading"] = np.arctan2(vel[:, 1], vel[:, 0])
         return out
+
+    def save(self) -> dict[str, np.ndarray]:
+        """Checkpoints: the sorted state with its ids, the closest approach so far and
+        M3's radius counters (everything else is rebuilt each step)."""
+        out = self.state.save()
+        if self.closest:
+            c = self.closest
+            out["closest"] = np.array([c["distance"], *c["pair"], c["time"]], np.float64)
+        if isinstance(self.radii, AgentRadii):
+            out["radius_counts"] = self.radii.counts.to_numpy()
+        return out
+
+    def load(self, state: Mapping[str, np.ndarray]) -> None:
+        self.state.load(state)
+        if "closest" in state:
+            d, i, j, t = state["closest"].tolist()
+            self.closest = {"distance": d, "pair": [int(i), int(j)], "time": t}
+        if isinstance(self.radii, AgentRadii):
+            self.radii.counts.from_numpy(state["radius_counts"])
 
     def convergence_keys(self) -> list[str]:
         if self.mission.per_component:

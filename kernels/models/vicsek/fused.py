@@ -699,6 +699,7 @@ class VicsekBatch(FusedBatch):
 
     dimensions = (2, 3)
     QUEUED = True  # `advance`'s threads take replicas from a queue
+    CHECKPOINTS = True  # the whole state is in `args`
 
     def __init__(self, scenarios: list[Scenario]):
         from ...space.initial import initial_state

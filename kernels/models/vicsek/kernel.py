@@ -7,6 +7,7 @@ the same); the 3D noise in noise.py (docs/MODELS_3D.md); the small-N batch in fu
 Headings are reported as theta = atan2(e) in (-pi, pi]; in 3D as the unit vectors.
 """
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -14,6 +15,7 @@ import taichi as ti
 
 from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 
+from ...checkpoint import put
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
@@ -28,6 +30,7 @@ from .step import P, block_step_kernel, step_kernel
 
 nd = ti.types.ndarray()
 _TWO_PI = 2 * np.pi
+LINKED = ("count", "longest", "open_since")  # Theorem 2's counters
 
 
 @ti.kernel
@@ -232,6 +235,26 @@ class VicsekKernel(ModelKernel):
         deg = np.empty(self.n, dtype=np.int32)
         deg[self.state.ids_numpy()] = self.graph.deg.to_numpy()
         return {"degree": deg}
+
+    def save(self) -> dict[str, np.ndarray]:
+        """The sorted state with its ids, and Theorem 2's tracking: the forest of the
+        union of the graphs since the last interval closed, and its counters."""
+        out = self.state.save()
+        if self.track:
+            out["linked/parent"] = self.parent_u.to_numpy()
+            out["linked/counts"] = np.array([self.linked[k] for k in LINKED], np.int64)
+        return out
+
+    def load(self, state: Mapping[str, np.ndarray]) -> None:
+        """Back from `save`. The next state an observation computed ahead is forgotten:
+        the step recomputes it, to the same bits (the visit with the graph and without
+        give the same state)."""
+        self.state.load(state)
+        if self.track:
+            put(self.parent_u, "linked/parent", state["linked/parent"])
+            self.linked = dict(zip(LINKED, (int(v) for v in state["linked/counts"]),
+                                   strict=True))
+        self._advanced_for = self._graph_for = -1
 
     def _theta(self, arrays: dict[str, ti.Ndarray]) -> ti.Ndarray:
         return arrays.get("theta", self._no_theta)
