@@ -9,6 +9,8 @@ Heading rules over the closed neighbourhood N_i ∪ {i}, N_i = {j : |r_ij| <= r}
 xi_i is uniform in [-eta/2, eta/2] (optional for the JLM rules, whose theorems are noise-free).
 In 3D (rule vicsek only) the noise turns the mean direction to a direction uniform in the
 spherical cap of half-angle eta/2 around it (docs/MODELS_3D.md).
+noise "vectorial" (rule vicsek, Grégoire & Chaté 2004): e(theta_i) <- w / |w|,
+w = sum_{N_i ∪ {i}} e(theta_j) + eta n_i u_i, u_i a random unit vector, n_i = |N_i ∪ {i}|.
 """
 
 from __future__ import annotations
@@ -30,7 +32,8 @@ class VicsekParams(ModelParams):
     paper: ClassVar[str] = "001 Jadbabaie, Lin, Morse (2003); Vicsek et al. (1995)"
     equations: ClassVar[str] = (
         "vicsek: arg-sum of unit vectors + noise; average: eq. 1-2 (F = (I+D)^-1 (A+I)); "
-        "laplacian: eq. 17-18, theta <- theta - L theta / g, g > N; leader: eq. 22"
+        "laplacian: eq. 17-18, theta <- theta - L theta / g, g > N; leader: eq. 22; "
+        "noise 'vectorial': Grégoire-Chaté (2004), e <- w/|w|, w = sum e_j + eta n_i u_i"
     )
     summary: ClassVar[str] = "Constant-speed agents aligning headings with their neighbours."
     paper_inclusive: ClassVar[bool] = True
@@ -58,6 +61,16 @@ class VicsekParams(ModelParams):
         description="Noise amplitude: xi uniform in [-eta/2, eta/2] (radians), per agent "
         "and step; in 3D a direction uniform in the spherical cap of half-angle eta/2 "
         "around the mean. 0 for the JLM theorems.",
+    )
+    noise: Literal["angular", "vectorial"] = Field(
+        default="angular",
+        description="Rule vicsek's noise. angular (Vicsek 1995): the mean direction turned by "
+        "xi uniform in [-eta/2, eta/2] (3D: into the cap of half-angle eta/2). vectorial "
+        "(Grégoire & Chaté 2004, 'extrinsic'): e_i <- w/|w|, w = sum_j e_j + eta n_i u_i over "
+        "the closed neighbourhood (n_i agents), u_i a random unit vector: eta is the noise's "
+        "length against a fully aligned neighbourhood's mean (the literature moves with the "
+        "new heading: position_update new_heading). docs/models/vicsek.md relates the "
+        "two eta scales.",
     )
     g: PositiveReal | None = Field(
         default=None, description="Laplacian rule gain denominator; must exceed N (eq. 18)."
@@ -92,6 +105,10 @@ class VicsekParams(ModelParams):
         if ctx.radius is None:
             raise ValueError("model vicsek needs a neighbours block with the radius r")
         n = ctx.n_agents
+        if self.noise == "vectorial" and self.rule != "vicsek":
+            raise ValueError(
+                f"noise 'vectorial' adds a random vector to the sum of unit headings: rule "
+                f"'vicsek' only (rule {self.rule!r} averages angles)")
         if ctx.dimension != 2 and self.rule != "vicsek":
             raise ValueError(
                 f"rule {self.rule!r} averages headings as angles and runs in 2D only; "

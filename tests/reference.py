@@ -144,3 +144,28 @@ def formation_step(x, t, dt, targets_at, *, f, g, d, integrator="euler"):
     k3 = rates(x + 0.5 * dt * k2, t + 0.5 * dt)
     k4 = rates(x + dt * k3, t + dt)
     return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def vicsek_step_vectorial(pos, e, *, r, L, inclusive, v0dt, eta, u1, u2, move_new=False):
+    """One synchronous Vicsek step with vectorial noise (Grégoire & Chaté 2004), 2D or 3D:
+    e_i' = w / |w|, w = sum over the closed neighbourhood of e_j + eta n_i u_i, u_i the
+    random unit vector of the uniforms (u1, u2): 2D at angle 2 pi u1, 3D z = 2 u1 - 1 and
+    azimuth 2 pi u2. A zero w keeps the x axis."""
+    a = adjacency(pos, r, L, inclusive)
+    closed = a | np.eye(len(pos), dtype=bool)
+    n = closed.sum(axis=1).astype(np.float64)
+    if pos.shape[1] == 2:
+        u = np.stack([np.cos(2 * np.pi * u1), np.sin(2 * np.pi * u1)], axis=1)
+    else:
+        z = 2 * u1 - 1
+        rho = np.sqrt(np.maximum(0.0, 1 - z * z))
+        u = np.stack([rho * np.cos(2 * np.pi * u2), rho * np.sin(2 * np.pi * u2), z], axis=1)
+    w = closed.astype(np.float64) @ e + eta * n[:, None] * u
+    norm = np.linalg.norm(w, axis=1)
+    new = np.zeros_like(w)
+    new[:, 0] = 1.0
+    new[norm > 0] = w[norm > 0] / norm[norm > 0, None]
+    x = pos + v0dt * (new if move_new else e)
+    if L is not None:
+        x = np.mod(x, L)
+    return x, new

@@ -42,7 +42,7 @@ def positions(layout: str, dim: int, L: float, n: int, r: float, gen) -> np.ndar
     return crowd
 
 
-def build(dim, L, r, pos, eta, inclusive, move, gen):
+def build(dim, L, r, pos, eta, inclusive, move, gen, noise="angular"):
     n = len(pos)
     directions = gen.normal(size=(n, dim))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
@@ -52,7 +52,8 @@ def build(dim, L, r, pos, eta, inclusive, move, gen):
     else:
         initial["velocities"] = directions.tolist()
     sc = Scenario.model_validate({
-        "model": {"kind": "vicsek", "v0": 0.3, "eta": eta, "position_update": move},
+        "model": {"kind": "vicsek", "v0": 0.3, "eta": eta, "position_update": move,
+                  "noise": noise},
         "space": {"kind": "periodic", "L": L, "dimension": dim},
         "neighbours": {"radius": r, "inclusive": inclusive},
         "initial": initial,
@@ -91,10 +92,10 @@ def test_by_cell_step_equals_the_per_agent_step_bit_for_bit(case):
     gen = np.random.default_rng(len(layout) + 10 * dim + n)
     k = build(dim, L, r, positions(layout, dim, L, n, r, gen), eta, inclusive, move, gen)
     assert k.grid.blocks and k.kernel is block_step_kernel(inclusive, move == "new_heading",
-                                                           dim)
+                                                           dim, False)
     k.state.sort(k.grid, 0)
     per_agent = step_kernel(RULES["vicsek"], inclusive, True, move == "new_heading", False,
-                            dim)
+                            dim, False)
     want = one_step(k, per_agent)
     got = one_step(k, k.kernel)
     for a, b in zip(want, got, strict=True):
@@ -109,7 +110,7 @@ def test_fewer_than_three_cells_across_keep_the_per_agent_step():
     gen = np.random.default_rng(1)
     k = build(3, 2.5, 1.0, gen.uniform(0, 2.5, size=(50, 3)), 0.5, False, "old_heading", gen)
     assert not k.grid.blocks
-    assert k.kernel is step_kernel(RULES["vicsek"], False, True, False, False, 3)
+    assert k.kernel is step_kernel(RULES["vicsek"], False, True, False, False, 3, False)
 
 
 def random_box(dim, L, n, eta, steps, seed, recording=None) -> Scenario:
@@ -156,7 +157,7 @@ def test_a_gpu_policy_steps_per_agent_to_the_same_bits(dim):
     states = []
     for backend in ("cpu", "cuda"):
         k = kernel_for("vicsek")(sc, DevicePolicy.for_backend(backend))
-        blocked = k.kernel is block_step_kernel(sc.inclusive, False, dim)
+        blocked = k.kernel is block_step_kernel(sc.inclusive, False, dim, False)
         assert blocked == (backend == "cpu")
         for step in range(10):
             k.step(step)

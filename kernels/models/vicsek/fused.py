@@ -92,13 +92,14 @@ def _tracks(scenario: Scenario) -> bool:
 
 
 @cache
-def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
+def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: bool):
     """The window kernel for one rule and geometry (compile-time specialised). `full`:
     some replica asks for the components, Theorem 2's intervals or the heading spread;
     without them the kernel is half the code (the visit that links the graph, the
     union-find and the spread are left out), which halves what Taichi re-reads and
     LLVM re-generates at every process start. The arithmetic of a step is the same in
-    both, so a replica's bits do not depend on `full`. `dim` 3: the vicsek rule only."""
+    both, so a replica's bits do not depend on `full`. `dim` 3 and `vectorial` (noise): the
+    vicsek rule only."""
     vicsek = rule == RULES["vicsek"]
     # ps is flat, slot k's state at k * W .. k * W + W - 1: a compile-time stride instead
     # of the array's runtime shape in every address of the visit (3% of a step).
@@ -478,7 +479,7 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int = 2):
             for i in range(a0, a0 + n):
                 parent_u[i] = i
 
-    law = agent_step(rule, periodic, dim, True)
+    law = agent_step(rule, periodic, dim, True, vectorial)
 
     @ti.func
     def update(b, i, k, a0, acc, key0, key1, move_new, prm: ti.template(),
@@ -710,7 +711,9 @@ class VicsekBatch(FusedBatch):
         self.rule = p0.rule
         self.periodic = isinstance(first.space, PeriodicBox)
         self.dim = dim = first.dimension
-        self.kernel = advance_kernel(RULES[p0.rule], self.periodic, self.full(first), dim)[0]
+        self.vectorial = p0.noise == "vectorial"
+        self.kernel = advance_kernel(RULES[p0.rule], self.periodic, self.full(first), dim,
+                                     self.vectorial)[0]
         ns = [s.n_agents for s in scenarios]
         self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
         caps = [2 * n + 16 for n in ns]  # cells per replica (the cell budget) + 1
@@ -848,7 +851,7 @@ class VicsekBatch(FusedBatch):
         """Scenarios with the same key share a launch; None: not for this path."""
         p: VicsekParams = scenario.model  # type: ignore[assignment]
         return ("vicsek", p.rule, isinstance(scenario.space, PeriodicBox),
-                cls.full(scenario), scenario.dimension)
+                cls.full(scenario), scenario.dimension, p.noise)
 
 
 class VicsekBatched(VicsekBatch):
@@ -862,7 +865,8 @@ class VicsekBatched(VicsekBatch):
     def __init__(self, scenarios: list[Scenario]):
         super().__init__(scenarios)
         self.step_kernel = advance_kernel(RULES[self.rule], self.periodic,
-                                          self.full(scenarios[0]), self.dim)[1]
+                                          self.full(scenarios[0]), self.dim,
+                                          self.vectorial)[1]
         B = len(scenarios)
         # On the CPU the kernel runs on the host arrays in place (measured: device arrays
         # cost more per launch there); a GPU's launches take device arrays, which a host

@@ -114,11 +114,13 @@ class VicsekKernel(ModelKernel):
             self._arc_hi = ti.ndarray(float, shape=n)
         variant = (RULES[p.rule], scenario.inclusive, self.periodic,
                    p.position_update == "new_heading")
-        self.kernel = step_kernel(*variant, False, dim)
+        vectorial = p.noise == "vectorial"
+        self.kernel = step_kernel(*variant, False, dim, vectorial)
         if p.rule == "vicsek" and self.grid.blocks and policy.cell_blocks:  # same bits
             self.kernel = block_step_kernel(scenario.inclusive,
-                                            p.position_update == "new_heading", dim)
-        self.kernel_with_graph = step_kernel(*variant, True, dim)
+                                            p.position_update == "new_heading", dim,
+                                            vectorial)
+        self.kernel_with_graph = step_kernel(*variant, True, dim, vectorial)
         self.track = p.tracks_linked(n, scenario.recording.observables)
         if self.track:
             self.parent_u = ti.ndarray(ti.i32, shape=n)

@@ -13,6 +13,9 @@ id and the step's noise keys. With S_i those sums:
   x_i' = x_i + v0 dt e(phi_i), phi = theta (old, default) or theta' (new), wrapped into
   the periodic box [0, L)^d.
 xi_i = eta (u - 1/2), u the counter-based hash of (seed, step, agent id) (rng.py).
+Vectorial noise (the vicsek rule, Grégoire & Chaté, PRL 92, 025702, 2004):
+  e(theta_i') = w / |w|, w = S + eta n_i u_i, n_i = |N_i ∪ {i}|, u_i a random unit vector
+  (2D: at angle 2 pi u; 3D: uniform on the sphere from two draws, `unit_vector`).
 """
 
 from functools import cache
@@ -20,7 +23,7 @@ from functools import cache
 import taichi as ti
 
 from ...space import rng, trig
-from .noise import cap_turn
+from .noise import cap_turn, unit_vector
 
 RULES = {"vicsek": 0, "average": 1, "laplacian": 2, "leader": 3}
 # The law's parameters, in this order: v0 dt, eta, g (laplacian), L (periodic box),
@@ -29,12 +32,14 @@ V0DT, ETA, G, L, THETA0, CAP = range(6)
 
 
 @cache
-def agent_step(rule: int, periodic: bool, dim: int, reciprocal: bool):
+def agent_step(rule: int, periodic: bool, dim: int, reciprocal: bool, vectorial: bool = False):
     """The law of one rule, geometry and dimension. `reciprocal`: the 2D vicsek rule
     scales S by 1 / |S| (the fused and batched schedules) instead of dividing each
     component by |S| (the per-step one): the two round differently, and each schedule
-    keeps the bits it has always had."""
+    keeps the bits it has always had. `vectorial`: the vicsek rule with Grégoire–Chaté
+    noise (the sums then carry the count n_i in acc[dim])."""
     vicsek = rule == RULES["vicsek"]
+    assert vicsek or not vectorial, "vectorial noise is the vicsek rule's"
 
     @ti.func
     def step(th, x, e, acc, agent, key, key2, q, move_new):
@@ -45,6 +50,11 @@ def agent_step(rule: int, periodic: bool, dim: int, reciprocal: bool):
         state is not finite."""
         new = th
         e_new = ti.Vector.unit(dim, 0, float)
+        if ti.static(vectorial):
+            if q[ETA] > 0.0:  # w = S + eta n_i u_i, in place of S
+                u = unit_vector(rng.uniform(key, agent), rng.uniform(key2, agent), dim)
+                for c in ti.static(range(dim)):
+                    acc[c] += q[ETA] * acc[dim] * u[c]
         if ti.static(vicsek):
             nrm2 = acc[0] * acc[0] + acc[1] * acc[1]
             if ti.static(dim == 3):
@@ -60,20 +70,21 @@ def agent_step(rule: int, periodic: bool, dim: int, reciprocal: bool):
             new = th - (acc[2] * th - acc[0]) / q[G]  # eq. 18
         else:
             new = acc[0] / acc[2]  # eq. 1-2 (and 22 for the leader)
-        if ti.static(dim == 3):
-            if q[ETA] > 0.0:
-                e_new = cap_turn(e_new, rng.uniform(key, agent), rng.uniform(key2, agent),
-                                 q[CAP])
-        elif q[ETA] > 0.0:
-            noise = q[ETA] * (rng.uniform(key, agent) - 0.5)
-            if ti.static(vicsek):
-                cs = trig.cos_sin(noise)  # rotate e_new by the noise angle
-                cn = cs[0]
-                sn = cs[1]
-                e_new = ti.math.vec2(cn * e_new[0] - sn * e_new[1],
-                                     sn * e_new[0] + cn * e_new[1])
-            else:
-                new += noise
+        if ti.static(not vectorial):  # angular noise (vectorial: in w already)
+            if ti.static(dim == 3):
+                if q[ETA] > 0.0:
+                    e_new = cap_turn(e_new, rng.uniform(key, agent), rng.uniform(key2, agent),
+                                     q[CAP])
+            elif q[ETA] > 0.0:
+                noise = q[ETA] * (rng.uniform(key, agent) - 0.5)
+                if ti.static(vicsek):
+                    cs = trig.cos_sin(noise)  # rotate e_new by the noise angle
+                    cn = cs[0]
+                    sn = cs[1]
+                    e_new = ti.math.vec2(cn * e_new[0] - sn * e_new[1],
+                                         sn * e_new[0] + cn * e_new[1])
+                else:
+                    new += noise
         if ti.static(rule == RULES["leader"]):
             if agent == 0:
                 new = q[THETA0]

@@ -1,4 +1,4 @@
-"""The 3D Vicsek noise, shared by the per-step and the fused kernels (docs/MODELS_3D.md)."""
+"""The Vicsek noises' random directions, for every schedule (law.py; docs/MODELS_3D.md)."""
 
 import taichi as ti
 
@@ -22,3 +22,20 @@ def cap_turn(m, u1, u2, cap):
     # call instead of libm's two (5 % of a 3D step at 10^6 in a profile).
     cs = -trig.cos_sin(2.0 * ti.math.pi * u2 - ti.math.pi)
     return ct * m + st * (cs[0] * b1 + cs[1] * b2)
+
+
+@ti.func
+def unit_vector(u1, u2, dim: ti.template()):
+    """A random unit vector from two uniforms on [0, 1): 2D at angle 2 pi u1 (u2 unused),
+    3D uniform on the sphere (Archimedes: z = 2 u1 - 1 uniform, azimuth 2 pi u2). The
+    angle as -(cos, sin)(2 pi u - pi), trig.cos_sin's range, as in `cap_turn`."""
+    out = ti.Vector.zero(float, dim)
+    if ti.static(dim == 2):
+        cs = -trig.cos_sin(2.0 * ti.math.pi * u1 - ti.math.pi)
+        out = ti.Vector([cs[0], cs[1]])
+    else:
+        z = 2.0 * u1 - 1.0
+        rho = ti.sqrt(ti.max(0.0, 1.0 - z * z))
+        cs = -trig.cos_sin(2.0 * ti.math.pi * u2 - ti.math.pi)
+        out = ti.Vector([rho * cs[0], rho * cs[1], z])
+    return out

@@ -35,10 +35,10 @@ P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0", "CAP")
 
 
 @cache
-def _finisher(rule: int, periodic: bool, move_new: bool, dim: int):
+def _finisher(rule: int, periodic: bool, move_new: bool, dim: int, vectorial: bool):
     """The end of one agent's step, shared by the per-agent and the by-cell kernels: the
     law (law.py) on the agent's state and sums, and the writes."""
-    law = agent_step(rule, periodic, dim, False)
+    law = agent_step(rule, periodic, dim, False, vectorial)
 
     @ti.func
     def finish(i, xi, acc, theta: ti.template(), ew: ti.template(), ids: ti.template(),
@@ -66,14 +66,14 @@ def _finisher(rule: int, periodic: bool, move_new: bool, dim: int):
 
 @cache
 def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with_graph: bool,
-                dim: int = 2):
-    """Compile-time specialised step for one rule, geometry and dimension. `with_graph`
+                dim: int, vectorial: bool):
+    """Compile-time specialised step for one rule, geometry, dimension and noise. `with_graph`
     also fills the graph observables of G(t) from the same neighbour visit: each agent's
     degree, and the union of every edge into `parent` (slot-indexed) for the components."""
 
     # The sums' last lane counts the closed neighbourhood: the JLM rules average over it,
-    # the vicsek rule needs it only for the degrees.
-    counted = rule != RULES["vicsek"] or with_graph
+    # the vicsek rule needs it only for the degrees and for vectorial noise (eta n_i).
+    counted = rule != RULES["vicsek"] or with_graph or vectorial
 
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):
@@ -98,7 +98,7 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
 
     visit = make_visitor(pair, dim=dim)
 
-    finish = _finisher(rule, periodic, move_new, dim)
+    finish = _finisher(rule, periodic, move_new, dim, vectorial)
 
     @ti.kernel
     def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, ew_out: nd,
@@ -118,12 +118,13 @@ def step_kernel(rule: int, inclusive: bool, periodic: bool, move_new: bool, with
 
 
 @cache
-def block_step_kernel(inclusive: bool, move_new: bool, dim: int = 2):
+def block_step_kernel(inclusive: bool, move_new: bool, dim: int, vectorial: bool):
     """The vicsek rule's step in the periodic box with at least 3 cells across, by cell
     blocks (kernels/space/blocks.py): each agent's sum adds the same terms in the same
     order as in `step_kernel`'s visit, so the bits are the same
-    (tests/test_vicsek_by_cell.py)."""
-    finish = _finisher(RULES["vicsek"], True, move_new, dim)
+    (tests/test_vicsek_by_cell.py). Vectorial noise counts n_i in the sums' column dim."""
+    finish = _finisher(RULES["vicsek"], True, move_new, dim, vectorial)
+    lanes = dim + int(vectorial)
 
     @ti.func
     def pair(k, p, Iv, X: ti.template(), acc: ti.template(), S: ti.template()):
@@ -138,9 +139,11 @@ def block_step_kernel(inclusive: bool, move_new: bool, dim: int = 2):
                 w[q] = ti.select(d2 <= r2, 1.0, 0.0)
             else:
                 w[q] = ti.select(d2 < r2, 1.0, 0.0)
-        # Four columns whatever dim (a 2D heading padded with zeros): each lane's sum is
-        # then one add of a whole vector register.
-        ek4 = ti.Vector([ek[a] if a < dim else 0.0 for a in ti.static(range(4))])
+        # Four columns whatever dim (a 2D heading padded with zeros, and a 1 in column
+        # dim to count n_i for vectorial noise): each lane's sum is then one add of a
+        # whole vector register.
+        ek4 = ti.Vector([ek[a] if a < dim else (1.0 if a == dim and vectorial else 0.0)
+                         for a in ti.static(range(4))])
         for q in ti.static(range(BLOCK_LANES)):
             for a in ti.static(range(4)):
                 acc[q, a] += w[q] * ek4[a]
@@ -148,7 +151,7 @@ def block_step_kernel(inclusive: bool, move_new: bool, dim: int = 2):
     @ti.func
     def update(i, xi, acc, F: ti.template(), keys):
         theta, ew, ids, pos_out, theta_out, ew_out, prm, bad = ti.static(F)
-        finish(i, xi, ti.Vector([acc[a] for a in ti.static(range(dim))]), theta, ew, ids,
+        finish(i, xi, ti.Vector([acc[a] for a in ti.static(range(lanes))]), theta, ew, ids,
                pos_out, theta_out, ew_out, prm, keys[0], keys[1], bad)
 
     cell_pass = make_cell_pass(make_block_visitor(pair, dim), update, 4, "box", dim)
