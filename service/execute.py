@@ -8,6 +8,9 @@ The folder holds:
                     what drawing the run needs: the model card's facts resolved for this
                     scenario and the overlay geometry (kernels/overlays.py), so
                     that the renderer reads files and never imports the engine
+  trajectory.gsd    the frames in HOOMD's GSD schema, when recording.format names gsd
+                    (service/gsd_trajectory.py); trajectory.h5 then holds frames only
+                    when the format also names h5md
 Everything is written into a hidden sibling folder first and renamed into place at the
 end, so the target is either complete or absent; a run that blows up still lands, with
 status "diverged" and the frames recorded before the blow-up, and so does a run stopped
@@ -36,6 +39,18 @@ if TYPE_CHECKING:
     from flocklab.kernels import RunResult
 
 ARTIFACTS = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5")
+
+
+class Frames:
+    """The frame sink of a run: each trajectory writer of `recording.format` gets every
+    frame."""
+
+    def __init__(self, writers: list[Any]):
+        self.writers = writers
+
+    def frame(self, step: int, time: float, arrays: dict[str, np.ndarray]) -> None:
+        for w in self.writers:
+            w.frame(step, time, arrays)
 
 
 def write_observables_csv(path: Path, observables: dict[str, np.ndarray]) -> None:
@@ -86,20 +101,30 @@ def execute_to_dir(
     tmp.mkdir()
     try:
         (tmp / "scenario.json").write_text(scenario.model_dump_json(indent=2))
+        formats = scenario.recording.formats
         writer = H5MDWriter(tmp / "trajectory.h5", scenario)
+        gsd_writer, files = None, list(ARTIFACTS)
+        if "gsd" in formats:
+            from .gsd_trajectory import GSD_FILE, GSDWriter
+
+            gsd_writer = GSDWriter.for_scenario(tmp / GSD_FILE, scenario)
+            files.append(GSD_FILE)
+        sinks = [w for w in (writer if "h5md" in formats else None, gsd_writer) if w]
         live = LiveObservables(tmp / LIVE_FILE)
         try:
             result = kernels.run(
-                scenario, sink=writer, on_progress=on_progress, should_stop=should_stop,
-                on_observations=live.append, path=path,
+                scenario, sink=Frames(sinks), on_progress=on_progress,
+                should_stop=should_stop, on_observations=live.append, path=path,
             )
             writer.write_observables(result.observables)
             writer.write_overlays(overlays(scenario, np.array(writer.frame_times)))
         finally:
             writer.close()
+            if gsd_writer is not None:
+                gsd_writer.close()
         write_observables_csv(tmp / "observables.csv", result.observables)
         live.remove()
-        summary = run_summary(scenario, result, frames=writer.frames, files=list(ARTIFACTS))
+        summary = run_summary(scenario, result, frames=sinks[0].frames, files=files)
         if summary["status"] == "cancelled":
             summary["status"] = stopped_status
         if on_result is not None:
