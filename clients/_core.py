@@ -228,6 +228,17 @@ class ProgressBar:
             self.stream.flush()
 
 
+# The whole trajectory files a job may have, by `recording.format` name.
+TRAJECTORY_FILES = {"h5md": "trajectory.h5", "gsd": "trajectory.gsd"}
+
+
+def trajectory_file(format: str) -> str:
+    """The file name of a trajectory format ("h5md" or "gsd")."""
+    if format not in TRAJECTORY_FILES:
+        raise ValueError(f"format must be one of {', '.join(TRAJECTORY_FILES)}, not {format!r}")
+    return TRAJECTORY_FILES[format]
+
+
 def check_digest(header: str | None, actual: bytes, path: Path) -> None:
     """Compare a Repr-Digest header with the sha-256 of what was saved; delete on mismatch."""
     if header and header.startswith("sha-256=:"):

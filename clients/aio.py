@@ -212,10 +212,11 @@ class AsyncJob(_core.JobFields):
                                       params=params, timeout=max(self.client.timeout, 330.0))
         return _core.save_or_return(r.content, path)
 
-    async def download(self, path: str | Path) -> Path:
+    async def download(self, path: str | Path, format: str = "h5md") -> Path:
         path = Path(path)
         digest = hashlib.sha256()
-        async with self.client.http.stream("GET", f"/v1/jobs/{self.id}/trajectory.h5") as r:
+        name = _core.trajectory_file(format)
+        async with self.client.http.stream("GET", f"/v1/jobs/{self.id}/{name}") as r:
             if r.status_code >= 400:
                 await r.aread()
                 raise_for_status(r)

@@ -243,11 +243,13 @@ class Job(_core.JobFields):
                                 params=params, timeout=max(self.client.timeout, 330.0))
         return _core.save_or_return(r.content, path)
 
-    def download(self, path: str | Path) -> Path:
-        """Save the whole H5MD file, streamed, and check its sha-256."""
+    def download(self, path: str | Path, format: str = "h5md") -> Path:
+        """Save the whole H5MD file (format "gsd": the GSD file, which a job recorded with
+        recording.format gsd has), streamed, and check its sha-256."""
         path = Path(path)
         digest = hashlib.sha256()
-        with self.client.http.stream("GET", f"/v1/jobs/{self.id}/trajectory.h5") as r:
+        name = _core.trajectory_file(format)
+        with self.client.http.stream("GET", f"/v1/jobs/{self.id}/{name}") as r:
             if r.status_code >= 400:
                 r.read()
                 raise_for_status(r)

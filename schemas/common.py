@@ -228,9 +228,12 @@ class TimeSpec(Strict):
 # The recordable per-agent arrays computed from the state rather than held in it (a model
 # lists those it has in `derived_arrays`).
 DERIVED_ARRAYS = ("degree", "radius")
+# The trajectory files frames can go to: trajectory.h5 (service/h5md.py) and trajectory.gsd
+# (service/gsd_trajectory.py).
+TrajectoryFormat = Literal["h5md", "gsd"]
 
 class Recording(Strict):
-    """What to record and how often. Frames go to the H5MD trajectory file."""
+    """What to record and how often. Frames go to the trajectory files of `format`."""
 
     every: NonNegativeInt = Field(
         default=0, le=MAX_STEPS, description="Record a frame every k steps (0: no frames; the last "
@@ -279,6 +282,30 @@ class Recording(Strict):
         default=None, description="Also write a checkpoint whenever this many seconds of "
         "wall-clock time have passed since the last one (null: by steps only).",
     )
+    format: TrajectoryFormat | list[TrajectoryFormat] = Field(
+        default="h5md", description="The trajectory files the frames go to: h5md "
+        "(trajectory.h5, which flocklab render and the service's /trajectory read), gsd "
+        "(trajectory.gsd, HOOMD's schema, read by OVITO, freud and MDAnalysis, 2D "
+        "included: docs/TRAJECTORIES.md), or both. trajectory.h5 is written either way "
+        "(observables, scenario, drawing); with gsd alone it holds no frames.",
+    )
+
+    @model_validator(mode="after")
+    def _gsd_frames(self) -> Recording:
+        """A GSD file is its frames, and a HOOMD frame is its particles' positions."""
+        formats = self.formats
+        if not formats or len(set(formats)) != len(formats):
+            raise ValueError(f"recording.format: name each of h5md, gsd at most once, and "
+                             f"at least one (got {self.format!r})")
+        if "gsd" in formats and (self.every == 0 or "position" not in self.arrays):
+            raise ValueError("recording.format gsd writes frames of positions: it needs "
+                             "recording.every > 0 and position in recording.arrays")
+        return self
+
+    @property
+    def formats(self) -> tuple[TrajectoryFormat, ...]:
+        """The trajectory files, as a tuple (`format` may be one name or a list)."""
+        return (self.format,) if isinstance(self.format, str) else tuple(self.format)
 
     @property
     def enabled(self) -> bool:

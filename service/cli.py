@@ -1,9 +1,9 @@
-"""The `flocklab` command: run, sweep, validate, models, presets, serve.
+"""The `flocklab` command: run, sweep, validate, convert, models, presets, serve.
 
 Exit codes: 0 success; 1 the run diverged or was interrupted; 2 bad input (invalid
 scenario, unreadable file, unknown preset); 3 the requested backend is unavailable;
-4 the command needs an extra that is not installed (`engine` for run and sweep, `service`
-for serve: service/cli_extras.py).
+4 the command needs an extra that is not installed (`engine` for run, sweep and convert,
+`service` for serve: service/cli_extras.py).
 """
 
 from __future__ import annotations
@@ -287,6 +287,18 @@ def cmd_validate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_convert(args: argparse.Namespace) -> int:
+    """`flocklab convert RUN_DIR --to gsd`: the run's trajectory.h5 frames as trajectory.gsd."""
+    from .gsd_trajectory import ConvertError, convert_run
+
+    try:
+        path, frames = convert_run(Path(args.run_dir), overwrite=args.overwrite)
+    except ConvertError as exc:
+        raise BadInput(str(exc)) from exc
+    print(f"{path}: {frames} frames")
+    return EXIT_OK
+
+
 def _validate_sweep(source: str, data: Any) -> int:
     try:
         sweep = load_sweep(data)
@@ -391,6 +403,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", help="scenario or sweep JSON file, '-' for stdin, or "
                    "preset:NAME")
     p.set_defaults(fn=cmd_validate)
+    p = sub.add_parser("convert", help="write a run folder's trajectory in another format "
+                       "(its trajectory.h5 frames as trajectory.gsd)")
+    p.add_argument("run_dir", metavar="RUN_DIR", help="a run folder holding trajectory.h5")
+    p.add_argument("--to", required=True, choices=["gsd"], help="the format to write")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing "
+                   "trajectory.gsd")
+    p.set_defaults(fn=cmd_convert)
     p = sub.add_parser("models", help="list the models, their parameters and equations")
     p.add_argument("name", nargs="?", help="show only this model (a kind, e.g. vicsek)")
     p.add_argument("--json", action="store_true", help="machine-readable catalog")

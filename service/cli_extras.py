@@ -1,9 +1,10 @@
 """The CLI's checks for the optional parts of an install, and `flocklab --version`.
 
 `pip install flocklab` alone is the client (httpx, pydantic, numpy). The commands that
-simulate need the `engine` extra and `serve` needs the `service` extra; without them the
-command answers one line naming the extra and exits with EXIT_MISSING_EXTRA, before
-anything imports the missing packages (so there is no traceback to show).
+simulate (and `convert`, which writes GSD) need the `engine` extra and `serve` needs the
+`service` extra; without them the command answers one line naming the extra and exits
+with EXIT_MISSING_EXTRA, before anything imports the missing packages (so there is no
+traceback to show).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ EXIT_MISSING_EXTRA = 4
 
 # The import names each extra brings, as the commands import them.
 EXTRA_MODULES: dict[str, tuple[str, ...]] = {
-    "engine": ("taichi", "h5py", "scipy"),
+    "engine": ("taichi", "h5py", "scipy", "gsd"),
     "service": ("fastapi", "uvicorn", "pydantic_settings", "h5py"),
 }
 
@@ -25,6 +26,7 @@ EXTRA_MODULES: dict[str, tuple[str, ...]] = {
 COMMAND_EXTRAS: dict[str, tuple[str, ...]] = {
     "run": ("engine",),
     "sweep": ("engine",),
+    "convert": ("engine",),  # h5py and gsd, the engine extra's file formats
     "serve": ("service",),
 }
 

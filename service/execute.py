@@ -8,6 +8,9 @@ The folder holds:
                     what drawing the run needs: the model card's facts resolved for this
                     scenario and the overlay geometry (kernels/overlays.py), so
                     that the renderer reads files and never imports the engine
+  trajectory.gsd    the frames in HOOMD's GSD schema, when recording.format names gsd
+                    (service/gsd_trajectory.py); trajectory.h5 then holds frames only
+                    when the format also names h5md
 Everything is written into a hidden sibling folder first and renamed into place at the
 end, so the target is either complete or absent; a run that blows up still lands, with
 status "diverged" and the frames recorded before the blow-up, and so does a run stopped
@@ -52,6 +55,18 @@ if TYPE_CHECKING:
     from flocklab.kernels import RunResult
 
 ARTIFACTS = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5")
+
+
+class Frames:
+    """The frame sink of a run: each trajectory writer of `recording.format` gets every
+    frame."""
+
+    def __init__(self, writers: list[Any]):
+        self.writers = writers
+
+    def frame(self, step: int, time: float, arrays: dict[str, np.ndarray]) -> None:
+        for w in self.writers:
+            w.frame(step, time, arrays)
 
 
 def write_observables_csv(path: Path, observables: dict[str, np.ndarray]) -> None:
@@ -198,6 +213,7 @@ def _run_in(tmp: Path, out_dir: Path, scenario: Scenario, lock: IO[bytes] | None
     from .live_observables import LIVE_FILE, LiveObservables
 
     try:
+        formats = scenario.recording.formats
         frames = None
         if scenario.recording.checkpoints:
             frames = resume[2] if resume else FrameStore(tmp)
@@ -210,30 +226,45 @@ def _run_in(tmp: Path, out_dir: Path, scenario: Scenario, lock: IO[bytes] | None
                              {**frames.seal(), "path": str(state[PATH]),
                               "backend": str(state[BACKEND])})
 
-        writer = H5MDWriter(tmp / "trajectory.h5", scenario) if frames is None else None
+        files = list(ARTIFACTS)
+        if "gsd" in formats:
+            from .gsd_trajectory import GSD_FILE, GSDWriter
+
+            files.append(GSD_FILE)
+
+        def open_writers() -> tuple[H5MDWriter, list[Any]]:
+            """trajectory.h5 (always: observables, scenario, drawing) and the frame sinks
+            of `recording.format`."""
+            h5 = H5MDWriter(tmp / "trajectory.h5", scenario)
+            gsd = GSDWriter.for_scenario(tmp / GSD_FILE, scenario) if "gsd" in formats else None
+            return h5, [w for w in (h5 if "h5md" in formats else None, gsd) if w]
+
+        # A checkpointed run keeps its frames in the FrameStore and writes them at the end.
+        writer, sinks = open_writers() if frames is None else (None, [])
         live = LiveObservables(tmp / LIVE_FILE)
         try:
             try:
                 result = kernels.run(
-                    scenario, sink=frames or writer, on_progress=on_progress,
-                    should_stop=should_stop, on_observations=live.append, path=path,
+                    scenario, sink=Frames(sinks) if frames is None else frames,
+                    on_progress=on_progress, should_stop=should_stop,
+                    on_observations=live.append, path=path,
                     on_checkpoint=on_checkpoint, resume=resume[1] if resume else None,
                 )
             except CheckpointMismatch as exc:
                 raise CheckpointRefused(f"{tmp / CHECKPOINT} does not fit this run: {exc}"
                                         ) from None
             if frames is not None:
-                writer = H5MDWriter(tmp / "trajectory.h5", scenario)
-                frames.replay(writer)
+                writer, sinks = open_writers()
+                frames.replay(Frames(sinks))
             assert writer is not None
             writer.write_observables(result.observables)
             writer.write_overlays(overlays(scenario, np.array(writer.frame_times)))
         finally:
-            if writer is not None:
-                writer.close()
+            for w in {id(w): w for w in [writer, *sinks] if w is not None}.values():
+                w.close()
         write_observables_csv(tmp / "observables.csv", result.observables)
         live.remove()
-        summary = run_summary(scenario, result, frames=writer.frames, files=list(ARTIFACTS))
+        summary = run_summary(scenario, result, frames=sinks[0].frames, files=files)
         if resume is not None:
             summary["resumed_from_step"] = resume[0]["step"]
         if summary["status"] == "cancelled":

@@ -58,6 +58,26 @@ def image_is_exact(scenario: Scenario) -> bool:
     return getattr(model, speed) * scenario.time.dt * every < space.L / 2
 
 
+class PeriodicImages:
+    """The periodic image of each agent, counted from one recorded frame to the next: a
+    jump of more than L/2 between consecutive frames is a crossing of the box's edge
+    (exact while agents move less than L/2 per frame: `image_is_exact`)."""
+
+    def __init__(self, L: float):
+        self.L = L
+        self._last: np.ndarray | None = None
+        self._image: np.ndarray | None = None
+
+    def __call__(self, position: np.ndarray) -> np.ndarray:
+        """The images (N, D) int32 at this frame, given its wrapped positions."""
+        if self._last is None or self._image is None:
+            self._image = np.zeros(position.shape, dtype=np.int32)
+        else:
+            self._image -= np.rint((position - self._last) / self.L).astype(np.int32)
+        self._last = np.array(position, dtype=np.float64)
+        return self._image.copy()
+
+
 def drawing_facts(scenario: Scenario) -> dict[str, Any]:
     """The card's facts about drawing this run, resolved for its scenario."""
     card = type(scenario.model)
@@ -78,10 +98,7 @@ class H5MDWriter:
         self.compression = ({"compression": "gzip", "compression_opts": 4, "shuffle": True}
                             if rec.compression == "gzip" else {})
         self.time_unit, self.length_unit = type(scenario.model).units
-        # Periodic images: the box side, the last wrapped positions and their images.
-        self.L = scenario.space.L if image_is_exact(scenario) else None
-        self._last: np.ndarray | None = None
-        self._image: np.ndarray | None = None
+        self.images = PeriodicImages(scenario.space.L) if image_is_exact(scenario) else None
         h5 = self.f.create_group("h5md")
         h5.attrs["version"] = np.array([1, 1], dtype=np.int32)
         h5.create_group("author").attrs["name"] = "flocklab user"
@@ -116,8 +133,8 @@ class H5MDWriter:
     def frame(self, step: int, time: float, arrays: dict[str, np.ndarray]) -> None:
         if "position" in arrays:
             self.frame_times.append(time)
-        if self.L is not None and "position" in arrays:
-            arrays = {**arrays, "image": self._track_image(arrays["position"])}
+        if self.images is not None and "position" in arrays:
+            arrays = {**arrays, "image": self.images(arrays["position"])}
         for name, value in arrays.items():
             if name not in self.swarm:
                 self._create(name, value)
@@ -153,17 +170,6 @@ class H5MDWriter:
     def _unit(ds: h5py.Dataset, unit: str | None) -> None:
         if unit:
             ds.attrs["unit"] = unit
-
-    def _track_image(self, position: np.ndarray) -> np.ndarray:
-        """The image of each agent: a jump of more than L/2 between consecutive frames is
-        a crossing of the box's edge (exact while agents move less than L/2 per frame)."""
-        assert self.L is not None
-        if self._last is None or self._image is None:
-            self._image = np.zeros(position.shape, dtype=np.int32)
-        else:
-            self._image -= np.rint((position - self._last) / self.L).astype(np.int32)
-        self._last = np.array(position, dtype=np.float64)
-        return self._image.copy()
 
     def write_observables(self, observables: dict[str, np.ndarray]) -> None:
         obs = self.f.create_group("observables")

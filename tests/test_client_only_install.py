@@ -24,7 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 CLIENT_MODULES = ("numpy", "numpy.libs", "pydantic", "pydantic_core", "annotated_types",
                   "typing_extensions", "typing_inspection", "httpx", "httpcore", "anyio",
                   "h11", "idna", "certifi", "sniffio")
-ENGINE_AND_SERVICE = ("taichi", "h5py", "scipy", "fastapi", "uvicorn", "pydantic_settings")
+ENGINE_AND_SERVICE = ("taichi", "h5py", "scipy", "gsd", "fastapi", "uvicorn",
+                      "pydantic_settings")
 
 
 def _site_packages(env: Path) -> Path:
@@ -67,6 +68,7 @@ def _check_client_only(cli: list[str], python: Path, tmp_path: Path) -> None:
     for args, extra in ((["run", "--out", str(tmp_path / "o")], "engine"),
                         (["sweep", "preset:vicsek-1995-fig2a", "--out", str(tmp_path / "s")],
                          "engine"),
+                        (["convert", str(tmp_path), "--to", "gsd"], "engine"),
                         (["serve", "--port", "1"], "service")):
         proc = subprocess.run([*cli, *args], capture_output=True, text=True, timeout=120)
         assert proc.returncode == EXIT_MISSING_EXTRA, proc.stderr

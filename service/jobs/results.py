@@ -2,7 +2,7 @@
 
 Layout under the results root:
     <job-uuid>/                 committed results of a job (scenario.json, summary.json,
-                                observables.csv, trajectory.h5)
+                                observables.csv, trajectory.h5[, trajectory.gsd])
     .attempts/<job-uuid>.<token>/   one attempt's output, written by a worker
     .attempts/.<job-uuid>.<token>.partial-*/   the same while the run writes it (renamed
                                 the attempt folder when complete; left behind by a kill)
@@ -22,7 +22,9 @@ import uuid
 from collections.abc import Collection
 from pathlib import Path
 
-RESULT_FILES = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5")
+# trajectory.gsd: only a run with recording.format gsd has it (service/gsd_trajectory.py).
+RESULT_FILES = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5",
+                "trajectory.gsd")
 SWEEP_FILES = ("sweep.json", "runs.csv", "table.csv", "series.csv", "sensitivity.csv")
 
 

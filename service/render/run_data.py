@@ -151,8 +151,9 @@ class RunData:
         (the last frame at or before T); default the last frame."""
         n = self.n_frames
         if n == 0:
-            raise RenderInputError(f"{self.folder.name}: no frames were recorded "
-                                   "(recording.every = 0, or no position array)", status=404)
+            raise RenderInputError(f"{self.folder.name}: no frames were recorded in "
+                                   "trajectory.h5 (recording.every = 0, no position array, "
+                                   "or recording.format gsd alone)", status=404)
         if frame is not None and time is not None:
             raise RenderInputError("give a frame or a time, not both", loc="time")
         if time is not None:

@@ -1,4 +1,4 @@
-"""A job's results: metrics (JSON), trajectory slices (NPZ or JSON) and the H5MD file.
+"""A job's results: metrics (JSON), trajectory slices (NPZ or JSON), the H5MD and GSD files.
 
 Paths come only from the job's UUID through `ResultStore` (R22). Expired results are 410
 `results-expired`; a results folder deleted behind the service's back is 410
@@ -172,15 +172,41 @@ async def trajectory(
 def trajectory_file(job_id: JobId, runtime: RuntimeDep,
                     range_: Annotated[str | None, Header(alias="Range", include_in_schema=False)
                                       ] = None) -> FileResponse:
+    return _whole_file(runtime, job_id, range_, "trajectory.h5", "application/x-hdf5")
+
+
+@router.get(
+    "/{job_id}/trajectory.gsd",
+    summary="The whole GSD trajectory file (HOOMD's schema)",
+    description="A job whose scenario's `recording.format` names gsd has it (404 "
+    "`no-trajectory` otherwise); OVITO, freud and MDAnalysis open it. Streamed from disk; "
+    "supports `Range` requests. `Repr-Digest` carries the file's sha-256 (RFC 9530).",
+    response_class=FileResponse,
+    responses={200: {"content": {"application/octet-stream": {
+                   "schema": {"type": "string", "format": "binary"}}}},
+               206: {"description": "Partial Content (a Range request)."},
+               400: {}, 416: {}, **_ERRORS},
+)
+def trajectory_gsd_file(job_id: JobId, runtime: RuntimeDep,
+                        range_: Annotated[str | None, Header(alias="Range",
+                                                             include_in_schema=False)] = None
+                        ) -> FileResponse:
+    return _whole_file(runtime, job_id, range_, "trajectory.gsd", "application/octet-stream")
+
+
+def _whole_file(runtime: JobRuntime, job_id: JobId, range_: str | None, name: str,
+                media_type: str) -> FileResponse:
+    """A job's result file `name`, downloaded as <job id><its suffix>."""
     job, _ = _results_dir(runtime, job_id)
-    path = runtime.results.file(job.id, "trajectory.h5")
+    path = runtime.results.file(job.id, name)
     if not path.is_file():
-        raise ProblemError(404, "no-trajectory", "No trajectory", "this job has no trajectory")
+        raise ProblemError(404, "no-trajectory", "No trajectory",
+                           f"this job has no {name}")
     check_range(range_, path)
     headers = {}
     sums = json.loads(job.checksums) if job.checksums else {}
-    if "trajectory.h5" in sums:
-        digest = base64.b64encode(bytes.fromhex(sums["trajectory.h5"])).decode()
+    if name in sums:
+        digest = base64.b64encode(bytes.fromhex(sums[name])).decode()
         headers["Repr-Digest"] = f"sha-256=:{digest}:"
-    return FileResponse(path, media_type="application/x-hdf5", filename=f"{job.id}.h5",
+    return FileResponse(path, media_type=media_type, filename=f"{job.id}{path.suffix}",
                         headers=headers)
