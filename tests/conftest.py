@@ -53,3 +53,34 @@ def fixed_windows(monkeypatch):
         monkeypatch.setattr(driver, "WINDOW_SECONDS", None)
 
     return fix
+
+
+# The lanes. The default `python -m pytest` is the fast lane, what a developer runs between
+# edits; `--all` (the README's test command, .ci/run) adds the slow lanes: tests marked
+# `slow` (large N, long integrations, kill-and-resume), `ray` (a real two-node cluster) and
+# everything under tests/e2e/ (fresh installs, the container, the browser, schemathesis).
+SLOW_LANES = ("slow", "ray", "e2e")
+
+
+def pytest_addoption(parser):
+    parser.addoption("--all", action="store_true",
+                     help="run every lane: the fast one and the slow, ray and e2e tests")
+
+
+def pytest_collection_modifyitems(config, items):
+    e2e = config.rootpath / "tests" / "e2e"
+    for item in items:
+        if e2e in item.path.parents:
+            item.add_marker(pytest.mark.e2e)
+    if config.getoption("--all") or config.getoption("markexpr"):
+        return  # everything, or the lanes a -m expression names
+    keep = [it for it in items if not any(it.get_closest_marker(m) for m in SLOW_LANES)]
+    if len(keep) < len(items):
+        config.hook.pytest_deselected(items=[it for it in items if it not in keep])
+        items[:] = keep
+
+
+def pytest_report_header(config):
+    if not (config.getoption("--all") or config.getoption("markexpr")):
+        return "lane: fast (the slow, ray and e2e tests are left out: --all runs them)"
+    return None
