@@ -50,6 +50,10 @@ class JobView(BaseModel):
     results_expire_at: dt.datetime | None
     checksums: dict[str, str] | None = Field(description="sha256 (hex) of each result file.")
     links: dict[str, str]
+    resumed_from_step: int | None = Field(
+        default=None, description="The step of the checkpoint the latest attempt went on "
+        "from, when a lost attempt of a job with checkpoints (`recording.checkpoint_every`) "
+        "left one; null when it ran from step 0.")
 
 
 class JobList(BaseModel):

@@ -127,14 +127,18 @@ def resume_dir(
     should_stop: Callable[[], bool] | None = None,
     on_result: Callable[[RunResult], None] | None = None,
     stopped_status: str = "cancelled",
+    on_resumed: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
     """Continue the checkpointed run of `out_dir` from its latest checkpoint: the one in
     its hidden folder (a run killed while it went on) or in the folder itself (a run
     stopped through `should_stop`). Its artifacts are those the run would have written
-    uninterrupted, bit for bit, plus `resumed_from_step` in the summary. Raises
+    uninterrupted, bit for bit, plus `resumed_from_step` in the summary. `on_resumed`
+    gets the checkpoint's step once every check passed, before the first step. Raises
     CheckpointRefused (service/checkpoints.py) when there is nothing to resume exactly."""
     out_dir = Path(out_dir)
     tmp, scenario, lock, meta, state, frames = _resumable(out_dir)
+    if on_resumed is not None:
+        on_resumed(int(meta["step"]))
     return _run_in(tmp, out_dir, scenario, lock, (meta, state, frames), path=meta["path"],
                    on_progress=on_progress, should_stop=should_stop, on_result=on_result,
                    stopped_status=stopped_status)

@@ -82,6 +82,7 @@ def job_view(job: Job, ttl_seconds: float) -> JobView:
         if results == "available" and job.finished_at else None,
         checksums=_checksums(job) if results == "available" else None,
         links=links,
+        resumed_from_step=job.resumed_from_step,
     )
 
 

@@ -9,6 +9,10 @@ Layout under the results root:
 A sweep's committed folder holds the sweep runner's output instead (sweep.json, runs.csv,
 table.csv, series.csv, runs/<i>/). A sweep's attempt folder outlives a lost attempt: the
 next attempt adopts it and the runner skips the runs already finished there.
+A job's run with checkpoints (docs/CHECKPOINTS.md) outlives a lost attempt the same way:
+its hidden folder holding `checkpoint.npz` (a killed worker's), or its attempt folder
+landed stopped with one (a worker that stopped because the API died), is kept, and the
+next attempt takes it over to resume from the checkpoint.
 A path is only ever built from a UUID the server generated and parsed back as a UUID,
 then resolved and checked to lie under the root; client-supplied names never reach here.
 """
@@ -21,6 +25,8 @@ import shutil
 import uuid
 from collections.abc import Collection
 from pathlib import Path
+
+from ..checkpoints import CHECKPOINT
 
 # trajectory.gsd: only a run with recording.format gsd has it (service/gsd_trajectory.py).
 RESULT_FILES = ("scenario.json", "summary.json", "observables.csv", "trajectory.h5",
@@ -65,6 +71,31 @@ class ResultStore:
                     shutil.rmtree(p, ignore_errors=True)
         return dst
 
+    def adopt_checkpoint(self, job_id: str, token: str) -> bool:
+        """Hand a new attempt of a job the checkpointed run of an earlier attempt, if one
+        is left; delete every other leftover of the job's earlier attempts.
+
+        The newest checkpoint wins. A hidden `.partial-*` folder is renamed the new
+        attempt's hidden folder, a landed (stopped) one its attempt folder: where
+        `execute.resume_dir(attempt_dir)` looks. Only the supervisor thread calls it,
+        before the worker is told to run. True when a checkpoint was handed over.
+        """
+        dst = self.attempt_dir(job_id, token)
+        u = _as_uuid(job_id)
+        earlier = [p for p in (*self.attempts.glob(f"{u}.*"), *self.attempts.glob(f".{u}.*"))
+                   if p.is_dir() and not _of_attempt(p, dst.name)]
+        held = [p for p in earlier if (p / CHECKPOINT).is_file()]
+        newest = max(held, key=lambda p: (p / CHECKPOINT).stat().st_mtime) if held else None
+        if newest is not None:
+            hidden = newest.name.startswith(".")
+            suffix = newest.name.rsplit(".partial-", 1)[-1]
+            os.replace(newest, dst.with_name(f".{dst.name}.partial-{suffix}") if hidden
+                       else dst)
+        for p in earlier:
+            if p != newest:
+                shutil.rmtree(p, ignore_errors=True)
+        return newest is not None
+
     def commit(self, job_id: str, token: str) -> bool:
         """Move an attempt's output into place; False when the attempt wrote nothing.
 
@@ -81,22 +112,30 @@ class ResultStore:
         _fsync_dir(self.root)
         return True
 
-    def discard_attempt(self, job_id: str, token: str) -> None:
+    def discard_attempt(self, job_id: str, token: str, *, keep_checkpoint: bool = False
+                        ) -> None:
         """Delete an attempt's output, finished or not: a killed run leaves its hidden
-        `.partial-*` (or `.old-*`) sibling, which would otherwise fill the disk."""
+        `.partial-*` (or `.old-*`) sibling, which would otherwise fill the disk.
+        `keep_checkpoint`: but a folder holding a checkpoint, which the job's next attempt
+        resumes from (`adopt_checkpoint`)."""
         final = self.attempt_dir(job_id, token)
-        shutil.rmtree(final, ignore_errors=True)
-        for leftover in self.attempts.glob(f".{final.name}.*"):
-            shutil.rmtree(leftover, ignore_errors=True)
+        for p in (final, *self.attempts.glob(f".{final.name}.*")):
+            if not (keep_checkpoint and (p / CHECKPOINT).is_file()):
+                shutil.rmtree(p, ignore_errors=True)
 
     def delete(self, job_id: str) -> None:
         shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
 
-    def sweep_attempts(self, keep: Collection[str] = ()) -> None:
+    def sweep_attempts(self, keep: Collection[str] = (),
+                       keep_checkpoints: Collection[str] = ()) -> None:
         """Delete every attempt folder but those of the jobs in `keep` (unfinished sweeps,
-        which resume from them); called at start-up, when no attempt is running."""
+        which resume from them) and those holding a checkpoint of a job in
+        `keep_checkpoints` (unfinished jobs); called at start-up, when no attempt runs."""
         for p in self.attempts.iterdir():
             if p.name.split(".")[0] in keep:
+                continue
+            if p.name.lstrip(".").split(".")[0] in keep_checkpoints and (
+                    p / CHECKPOINT).is_file():
                 continue
             if p.is_dir():
                 shutil.rmtree(p, ignore_errors=True)
@@ -108,6 +147,11 @@ class ResultStore:
         if not resolved.is_relative_to(self.root):
             raise ValueError("result path escapes the results root")
         return resolved
+
+
+def _of_attempt(path: Path, name: str) -> bool:
+    """Whether `path` is the attempt folder `name` or one of its hidden siblings."""
+    return path.name == name or path.name.startswith(f".{name}.")
 
 
 def _as_uuid(job_id: str | uuid.UUID) -> uuid.UUID:

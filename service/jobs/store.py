@@ -64,9 +64,12 @@ CREATE INDEX IF NOT EXISTS jobs_by_status ON jobs (status, seq);
 #   kind         'job' (one scenario) or 'sweep' (a parameter sweep: `scenario` holds the
 #                canonical sweep, steps_total its runs, steps_done the runs that ended)
 #   runs_failed  a sweep's runs that ended without measures so far (diverged)
+#   resumed_from_step  the checkpoint's step the latest attempt went on from (a job whose
+#                worker was lost; NULL: it ran from step 0)
 _ADDED_COLUMNS = {
     "kind": "TEXT NOT NULL DEFAULT 'job'",
     "runs_failed": "INTEGER NOT NULL DEFAULT 0",
+    "resumed_from_step": "INTEGER",
 }
 
 
@@ -116,6 +119,7 @@ class Job:
     checksums: str | None
     kind: str = "job"
     runs_failed: int = 0
+    resumed_from_step: int | None = None
 
     @property
     def terminal(self) -> bool:
@@ -270,7 +274,7 @@ class JobStore:
             db.execute(
                 "UPDATE jobs SET status = 'running', attempts = attempts + 1,"
                 " lease_owner = ?, lease_token = ?, lease_expires = ?,"
-                " started_at = ?, steps_done = 0"
+                " started_at = ?, steps_done = 0, resumed_from_step = NULL"
                 " WHERE id = ? AND status = 'queued'",
                 (owner, uuid.uuid4().hex, now + lease_seconds, now, row["id"]),
             )
@@ -296,6 +300,16 @@ class JobStore:
                 "UPDATE jobs SET steps_done = ?, runs_failed = COALESCE(?, runs_failed)"
                 " WHERE id = ? AND status = 'running' AND lease_token = ?",
                 (steps_done, runs_failed, job_id, token),
+            )
+
+    def set_resumed(self, job_id: str, token: str, step: int | None) -> None:
+        """Record that the running attempt went on from its predecessor's checkpoint at
+        `step` (None: it was refused, the attempt runs from step 0)."""
+        with self._tx() as db:
+            db.execute(
+                "UPDATE jobs SET resumed_from_step = ?, steps_done = COALESCE(?, 0)"
+                " WHERE id = ? AND status = 'running' AND lease_token = ?",
+                (step, step, job_id, token),
             )
 
     def finish(

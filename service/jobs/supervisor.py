@@ -5,7 +5,9 @@ renews the leases of running attempts (a worker busy inside a Taichi kernel cann
 heartbeat for itself), enforces cancellation and per-job timeouts from outside the worker
 (cooperative stop first, then SIGKILL after a grace period), re-queues jobs whose worker
 died (once: infrastructure failures only, R9) and reaps jobs whose lease expired (R2).
-Every transition goes through the store's conditional UPDATEs.
+A re-queued job whose run left a checkpoint (docs/CHECKPOINTS.md) goes on from it: the
+next attempt takes over the lost one's folder and the worker reports the step it resumed
+from (`resumed_from_step`). Every transition goes through the store's conditional UPDATEs.
 
 All state below is touched only by the supervisor thread; the API talks to it through
 `wake()` and `cancel()`, which are thread-safe.
@@ -153,7 +155,8 @@ class Supervisor:
     # -- the loop -----------------------------------------------------------------------
 
     def _run(self) -> None:
-        self.results.sweep_attempts(keep=self.store.unfinished_ids("sweep"))
+        self.results.sweep_attempts(keep=self.store.unfinished_ids("sweep"),
+                                    keep_checkpoints=self.store.unfinished_ids("job"))
         self._reap(startup=True)
         while not self._stopping.is_set():
             try:
@@ -239,6 +242,13 @@ class Supervisor:
                 a.progress_saved = now
                 self.store.set_progress(a.job_id, a.token, a.steps_done, a.runs_failed)
                 self.on_change(a.job_id)
+        elif kind == "resumed" and w.attempt and msg[1] == w.attempt.token:
+            a = w.attempt
+            a.steps_done = msg[2] or 0
+            self.store.set_resumed(a.job_id, a.token, msg[2])
+            if msg[2] is not None:
+                log.info("job %s: resumed from its checkpoint at step %d", a.job_id, msg[2])
+            self.on_change(a.job_id)
         elif kind == "result" and w.attempt and msg[1] == w.attempt.token:
             outcome = msg[2]
             w.rss = outcome.get("rss", 0)
@@ -276,8 +286,9 @@ class Supervisor:
         job = self.store.get(a.job_id)
         retried = (a.stop_reason is None and job is not None and not job.cancel_requested
                    and job.attempts < self.config.max_attempts)
-        if not (retried and a.kind == "sweep"):  # a sweep's retry resumes from its runs
-            self.results.discard_attempt(a.job_id, a.token)
+        # A sweep's retry resumes from its finished runs, a job's from its checkpoint.
+        if not (retried and a.kind == "sweep"):
+            self.results.discard_attempt(a.job_id, a.token, keep_checkpoint=retried)
         if a.stop_reason is not None:
             self._finish_stopped(a)
             return
@@ -330,15 +341,23 @@ class Supervisor:
         w.attempt = _Attempt(job_id=job.id, token=job.lease_token,
                              deadline=time.monotonic() + job.timeout_seconds,
                              timeout_seconds=job.timeout_seconds, kind=job.kind)
-        # A sweep's attempt continues in the folder of its lost predecessor, if any.
-        out_dir = (self.results.adopt_attempt(job.id, job.lease_token) if job.kind == "sweep"
-                   else self.results.attempt_dir(job.id, job.lease_token))
+        # A sweep's attempt continues in the folder of its lost predecessor, if any; a
+        # job's from its predecessor's checkpoint (local workers only: a Ray task starts
+        # over, docs/CHECKPOINTS.md).
+        resume = False
+        if job.kind == "sweep":
+            out_dir = self.results.adopt_attempt(job.id, job.lease_token)
+        else:
+            out_dir = self.results.attempt_dir(job.id, job.lease_token)
+            if self.config.executor.kind == "local":
+                resume = self.results.adopt_checkpoint(job.id, job.lease_token)
         order = {
             "job_id": job.id,
             "kind": job.kind,
             "token": job.lease_token,
             "scenario": job.scenario,
             "out_dir": str(out_dir),
+            "resume": resume,
             "limits": self.config.limits.to_dict(),
             "threads": self.config.threads_per_worker,
             "executor": self.config.executor.to_dict(),
@@ -420,6 +439,10 @@ class Supervisor:
             if not (startup or job.lease_owner == self.owner or expired):
                 continue
             assert job.lease_token is not None
+            if job.kind == "job" and (job.attempts >= self.config.max_attempts
+                                      or job.cancel_requested):
+                # No attempt follows: nothing will resume from the checkpoint it left.
+                self.results.discard_attempt(job.id, job.lease_token)
             if job.cancel_requested:
                 self.store.finish(job.id, job.lease_token, "cancelled")
             elif job.attempts < self.config.max_attempts:
@@ -459,9 +482,11 @@ class Supervisor:
                 w.process.join(1.0)
             w.conn.close()
             if w.attempt is not None and w.attempt.kind != "sweep":
-                # The killed run's partial output: the job re-runs from scratch (a sweep
-                # keeps its folder, which its next attempt adopts to skip finished runs).
-                self.results.discard_attempt(w.attempt.job_id, w.attempt.token)
+                # The killed run's partial output: the job re-runs from its checkpoint if
+                # it left one, else from scratch (a sweep keeps its folder, which its
+                # next attempt adopts to skip finished runs).
+                self.results.discard_attempt(w.attempt.job_id, w.attempt.token,
+                                             keep_checkpoint=True)
         self._workers.clear()
 
 

@@ -7,6 +7,9 @@ forked after `ti.init` hangs, taichi#6725). It talks to the supervisor over a pi
     worker -> supervisor   ("ready", pid)
                            ("progress", token, steps_done, steps_total)
                            ("progress", token, runs_ended, runs_total, runs_failed)  (sweeps)
+                           ("resumed", token, step | None)   (a job resumed from the
+                                           checkpoint of its lost attempt; None: that
+                                           checkpoint was refused, it runs from step 0)
                            ("result", token, {"summary", "checksums", "rss"}
                                            | {"problem", "rss"})
 
@@ -67,12 +70,16 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
         def should_stop() -> bool:
             return cancel_flag.value != 0 or orphaned()
 
+        def on_resumed(step: int | None, token: str = token) -> None:
+            with contextlib.suppress(OSError):
+                conn.send(("resumed", token, step))
+
         if order.get("kind") == "sweep":
             from .sweep_worker import run_sweep_order
 
             outcome = run_sweep_order(order, conn, should_stop)
         else:
-            outcome = _run_order(order, on_progress, should_stop)
+            outcome = _run_order(order, on_progress, should_stop, on_resumed)
         outcome["rss"] = _rss_bytes()
         try:
             conn.send(("result", token, outcome))
@@ -80,8 +87,10 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
             return
 
 
-def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dict[str, Any]:
-    """Re-validate and run one attempt; every failure becomes a problem body."""
+def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any,
+               on_resumed: Any) -> dict[str, Any]:
+    """Re-validate and run one attempt (from its lost predecessor's checkpoint when the
+    order says `resume`); every failure becomes a problem body."""
     from pydantic import ValidationError
 
     from flocklab.kernels.result import BackendUnavailable
@@ -106,8 +115,12 @@ def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dic
     scenario, notes = _fit_threads(scenario, None if on_ray else order.get("threads"))
     out_dir = Path(order["out_dir"])
     try:
-        summary = executor.run_job(scenario, out_dir, on_progress=on_progress,
-                                   should_stop=should_stop)
+        if order.get("resume"):
+            summary = _resume(executor, scenario, out_dir, notes, on_progress, should_stop,
+                              on_resumed)
+        else:
+            summary = executor.run_job(scenario, out_dir, on_progress=on_progress,
+                                       should_stop=should_stop)
     except BackendUnavailable as exc:
         return {"problem": problem("backend-unavailable", "Backend unavailable", 503,
                                    scrub_paths(str(exc)), backend=scenario.backend)}
@@ -135,6 +148,30 @@ def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any) -> dic
             return {"problem": problem("internal-error", "Internal error", 500,
                                        scrub_paths(f"{type(exc).__name__}: {exc}"))}
     return {"summary": summary, "checksums": checksums(out_dir)}
+
+
+def _resume(executor: Any, scenario: Any, out_dir: Path, notes: list[str], on_progress: Any,
+            should_stop: Any, on_resumed: Any) -> dict[str, Any]:
+    """Go on from the checkpoint the supervisor handed this attempt (the lost attempt's,
+    `ResultStore.adopt_checkpoint`), with that run's own scenario.json; a checkpoint that
+    cannot be resumed exactly (corrupted, another engine version) is dropped, with a
+    note, and the job runs again from step 0 (bits are never continued inexactly)."""
+    from flocklab.service.checkpoints import CheckpointRefused
+    from flocklab.service.execute import resume_dir
+
+    try:
+        return resume_dir(out_dir, on_progress=on_progress, should_stop=should_stop,
+                          on_resumed=on_resumed)
+    except CheckpointRefused as exc:
+        log.warning("job folder %s: checkpoint refused, running from step 0: %s",
+                    out_dir.name, exc)
+        on_resumed(None)
+        for p in (out_dir, *out_dir.parent.glob(f".{out_dir.name}.*")):
+            shutil.rmtree(p, ignore_errors=True)
+        notes.append(f"the lost attempt's checkpoint was refused ({scrub_paths(str(exc))}); "
+                     "the job ran again from step 0")
+        return executor.run_job(scenario, out_dir, on_progress=on_progress,
+                                should_stop=should_stop)
 
 
 def _fit_threads(scenario: Any, allowed: int | None) -> tuple[Any, list[str]]:

@@ -1,0 +1,138 @@
+"""A checkpointed job on a real server (docs/CHECKPOINTS.md, "In the service"): its worker
+killed with SIGKILL, or the whole API killed and restarted on the same data directory,
+the job goes on from its last checkpoint, not from step 0, says so in its events
+(`resumed_from_step`), and ends with the artifacts of the same scenario run uninterrupted
+by `flocklab run`, bit for bit (every dataset of trajectory.h5, observables.csv, the
+summary but for its timings)."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.test_checkpoint import assert_same_run
+
+from .svc_helpers import submit, wait_for
+from .test_durability import _alive, _workers
+
+CHECKPOINT_EVERY = 200
+STEPS = 3000
+# N = 2000 Vicsek agents for 3000 steps: about 10 s on one thread, a checkpoint every 200
+# steps and a frame every 250 (13 frames), an observation every 10.
+SCENARIO = {
+    "model": {"kind": "vicsek", "rule": "vicsek", "v0": 0.1, "eta": 1.0},
+    "space": {"kind": "periodic", "L": 2000 ** 0.5},
+    "neighbours": {"radius": 1.0}, "initial": {"kind": "random", "N": 2000},
+    "time": {"steps": STEPS, "dt": 1.0},
+    "recording": {"every": 250, "arrays": ["position", "heading"], "observables_every": 10,
+                  "checkpoint_every": CHECKPOINT_EVERY},
+    "seed": 11, "backend": "cpu",
+}
+
+
+def _checkpoints(data: Path, job_id: str) -> list[Path]:
+    """The job's checkpoints under the results root's attempt folders (hidden or not)."""
+    attempts = data / "results" / ".attempts"
+    return [*attempts.glob(f".{job_id}.*/checkpoint.npz"),
+            *attempts.glob(f"{job_id}.*/checkpoint.npz")]
+
+
+def _wait_checkpoint(data: Path, job_id: str, rng: random.Random) -> None:
+    """Until the running job has written a checkpoint, then a random moment more."""
+    deadline = time.monotonic() + 120
+    while not _checkpoints(data, job_id):
+        assert time.monotonic() < deadline, "the job wrote no checkpoint"
+        time.sleep(0.05)
+    time.sleep(rng.uniform(0.0, 1.0))
+
+
+def _reference(tmp: Path, job_dir: Path) -> Path:
+    """The job's own scenario.json run uninterrupted by `flocklab run`."""
+    out = tmp / "reference"
+    done = subprocess.run([sys.executable, "-m", "flocklab", "run",
+                           str(job_dir / "scenario.json"), "--out", str(out), "--quiet"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "resumed_from_step" not in json.loads(done.stdout)
+    return out
+
+
+def _events(http: httpx.Client, job_id: str) -> list[dict]:
+    """The job's Server-Sent Events (`event: job` rows) until its `event: end`."""
+    rows, name = [], None
+    with http.stream("GET", f"/v1/jobs/{job_id}/events", timeout=180) as r:
+        for line in r.iter_lines():
+            if line.startswith("event: "):
+                name = line.removeprefix("event: ")
+                if name == "end":
+                    break
+            elif line.startswith("data: ") and name != "end":
+                rows.append(json.loads(line.removeprefix("data: ")))
+    return rows
+
+
+def _assert_resumed(job: dict, data: Path, tmp: Path) -> int:
+    step = job["resumed_from_step"]
+    assert job["status"] == "succeeded" and job["attempts"] == 2, job
+    assert step is not None and 0 < step < STEPS and step % CHECKPOINT_EVERY == 0, job
+    job_dir = data / "results" / job["id"]
+    summary = json.loads((job_dir / "summary.json").read_text())
+    assert summary["resumed_from_step"] == step and summary["steps"] == STEPS
+    assert_same_run(_reference(tmp, job_dir), job_dir)
+    assert list((data / "results" / ".attempts").iterdir()) == []
+    return step
+
+
+@pytest.mark.slow
+def test_a_job_whose_worker_is_killed_resumes_from_its_checkpoint_bit_identical(
+        make_server, tmp_path):
+    data = tmp_path / "data"
+    server = make_server(data_dir=data)
+    with httpx.Client(base_url=server.url, timeout=30) as http:
+        job = submit(http, {"scenario": SCENARIO})
+        _wait_checkpoint(data, job["id"], random.Random(1))
+        running = http.get(f"/v1/jobs/{job['id']}").json()
+        assert running["status"] == "running" and running["resumed_from_step"] is None
+        (worker,) = _workers(server)
+        os.kill(worker, signal.SIGKILL)
+        events = _events(http, job["id"])
+        done = wait_for(http, job["id"], timeout=180)
+    assert done["error"] is None
+    step = _assert_resumed(done, data, tmp_path)
+    # The events show the second attempt resuming at the checkpoint's step, and its
+    # progress going on from there (never back through the steps before it).
+    resumed = [e for e in events if e["resumed_from_step"] is not None]
+    assert resumed and resumed[0]["attempts"] == 2 and resumed[0]["steps_done"] >= step
+    assert all(e["resumed_from_step"] == step for e in resumed)
+    assert [e["steps_done"] for e in resumed] == sorted(e["steps_done"] for e in resumed)
+
+
+@pytest.mark.slow
+def test_a_job_of_a_killed_service_resumes_after_restart_bit_identical(make_server, tmp_path):
+    data = tmp_path / "data"
+    s1 = make_server(data_dir=data)
+    with httpx.Client(base_url=s1.url, timeout=30) as http:
+        job = submit(http, {"scenario": SCENARIO})
+        _wait_checkpoint(data, job["id"], random.Random(2))
+        workers = _workers(s1)
+    s1.kill()
+    # The orphaned worker stops at its next step; its run lands stopped, checkpoint kept.
+    deadline = time.monotonic() + 30
+    while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_alive(p) for p in workers)
+    assert _checkpoints(data, job["id"])
+    s2 = make_server(data_dir=data)
+    with httpx.Client(base_url=s2.url, timeout=30) as http:
+        done = wait_for(http, job["id"], timeout=180)
+    assert done["error"] is None
+    _assert_resumed(done, data, tmp_path)
