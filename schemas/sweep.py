@@ -32,10 +32,12 @@ from typing import Annotated, Any, Literal
 from pydantic import (
     Discriminator,
     Field,
+    SerializerFunctionWrapHandler,
     StrictStr,
     Tag,
     ValidationError,
     field_validator,
+    model_serializer,
     model_validator,
 )
 
@@ -248,6 +250,17 @@ class Sweep(Strict):
             raise ValueError(f"the sweep expands to {n} runs, more than the limit of "
                              f"{MAX_RUNS}")
         return self
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler):  # type: ignore[no-untyped-def]
+        # (no return type, so pydantic keeps the fields' own serialization schema)
+        """The dump leaves out the `replicas` field when an axis sets the replicas: with
+        its default filled in, the stored sweep (the service's canonical form, its /spec)
+        would no longer validate ("give 'replicas' either as a field or as an axis")."""
+        data = handler(self)
+        if isinstance(data, dict) and self._replicas_axis():
+            data.pop("replicas", None)
+        return data
 
     # -- the grid -----------------------------------------------------------------------
 

@@ -1,0 +1,59 @@
+"""Sweeps and pictures under hostile input (issue 28), on a real server on 127.0.0.1 with
+real spawned workers: each test is one finding of the loopback attack, and failed on the
+code before its fix."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from typing import Any
+
+import httpx
+import pytest
+
+from flocklab.service.serve import ServerProcess
+
+from .conftest import _cleanup
+from .svc_helpers import assert_problem
+from .test_sweeps import SWEEP_ENV, submit, sweep_spec, wait_sweep
+
+
+@pytest.fixture(scope="module")
+def hostile_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    s = ServerProcess(tmp_path_factory.mktemp("hostile") / "data", env=SWEEP_ENV).start()
+    try:
+        yield s
+    finally:
+        _cleanup(s)
+
+
+@pytest.fixture
+def http(hostile_server: ServerProcess) -> Iterator[httpx.Client]:
+    with httpx.Client(base_url=hostile_server.url, timeout=60) as c:
+        yield c
+
+
+def _table(http: httpx.Client, sweep_id: str, name: str) -> dict[str, Any]:
+    r = http.get(f"/v1/sweeps/{sweep_id}/{name}", params={"format": "json"})
+    assert r.status_code == 200, r.text
+    return r.json()
+
+
+def test_a_replicas_axis_runs(http: httpx.Client):
+    """A `replicas` axis was accepted (202), then the worker refused its own stored form
+    ("give 'replicas' either as a field or as an axis") and the sweep always failed."""
+    from flocklab.schemas.sweep import Sweep
+
+    spec = sweep_spec(etas=(0.5, 2.0), name="replicas-axis")
+    del spec["replicas"]
+    spec["axes"].append({"path": "replicas", "values": [1, 2]})
+    created = submit(http, spec)
+    assert created["runs_total"] == 6  # 2 etas x (1 + 2) replicas
+    done = wait_sweep(http, created["id"])
+    assert done["status"] == "succeeded", done
+    assert (done["runs_done"], done["runs_failed"]) == (6, 0)
+    table = _table(http, created["id"], "table")
+    count = table["columns"].index("va_count")
+    assert [row[count] for row in table["data"]] == [1, 2, 1, 2]
+    stored = http.get(f"/v1/sweeps/{created['id']}/spec").content
+    assert Sweep.model_validate_json(stored).n_runs == 6  # the stored form validates
