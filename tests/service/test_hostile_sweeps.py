@@ -57,3 +57,20 @@ def test_a_replicas_axis_runs(http: httpx.Client):
     assert [row[count] for row in table["data"]] == [1, 2, 1, 2]
     stored = http.get(f"/v1/sweeps/{created['id']}/spec").content
     assert Sweep.model_validate_json(stored).n_runs == 6  # the stored form validates
+
+
+def test_b_no_server_path_in_the_sweep_plots_problem(http: httpx.Client,
+                                                     hostile_server: ServerProcess):
+    """Plotting a sweep without axes answered 422 "<the results folder>: the sweep has no
+    rows or no axes", the server's data path in the body."""
+    pytest.importorskip("matplotlib")
+    spec = sweep_spec(etas=(1.0,), replicas=1, name="no-axes")
+    spec["axes"] = []
+    done = wait_sweep(http, submit(http, spec)["id"])
+    assert done["status"] == "succeeded", done
+    r = http.get(f"/v1/sweeps/{done['id']}/render/plot.png", timeout=120)
+    body = assert_problem(r, 422)
+    assert "no rows or no axes" in body["detail"]
+    data = hostile_server.data_dir
+    for root in {str(data), str(data.resolve()), str(data.parent)}:
+        assert root not in r.text

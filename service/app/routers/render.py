@@ -26,6 +26,7 @@ from starlette.concurrency import run_in_threadpool
 
 from flocklab.schemas import FieldError
 from flocklab.service.jobs import Job
+from flocklab.service.jobs.disk import scrub_paths
 
 from ..deps import JobId, RuntimeDep
 from ..problems import ProblemError, invalid
@@ -202,17 +203,20 @@ async def _draw(slots: asyncio.Semaphore, what: str, folder: Path, target: Path,
 
 
 def _failure(code: int | None, out: bytes, err: bytes) -> ProblemError:
+    """The problem for a failed draw. The worker's messages name the folder (they are the
+    CLI's too, where a path helps): clients never see server paths, so they are scrubbed."""
     try:
         body = json.loads(out.decode().strip().splitlines()[-1])
     except (ValueError, IndexError):
         body = None
+    if code in (2, 3) and isinstance(body, dict):
+        detail = scrub_paths(str(body.get("detail")))
     if code == 2 and isinstance(body, dict):
         status = int(body.get("status", 422))
         if status == 404:
-            return ProblemError(404, "nothing-to-draw", "Nothing to draw", body["detail"])
+            return ProblemError(404, "nothing-to-draw", "Nothing to draw", detail)
         loc = f"query.{body['loc']}" if body.get("loc") else "query"
-        return invalid([FieldError(loc=loc, msg=body["detail"], type="value_error")])
+        return invalid([FieldError(loc=loc, msg=detail, type="value_error")])
     if code == 3 and isinstance(body, dict):
-        return ProblemError(503, "plotting-unavailable", "Plotting unavailable",
-                            body["detail"])
+        return ProblemError(503, "plotting-unavailable", "Plotting unavailable", detail)
     raise RuntimeError(f"render worker failed ({code}): {err.decode()[-2000:]}")
