@@ -4,8 +4,8 @@ code before its fix."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -14,7 +14,8 @@ import pytest
 from flocklab.service.serve import ServerProcess
 
 from .conftest import _cleanup
-from .svc_helpers import assert_problem
+from .svc_helpers import assert_problem, scenario, wait_for
+from .svc_helpers import submit as submit_job
 from .test_sweeps import SWEEP_ENV, submit, sweep_spec, wait_sweep
 
 
@@ -74,3 +75,36 @@ def test_b_no_server_path_in_the_sweep_plots_problem(http: httpx.Client,
     data = hostile_server.data_dir
     for root in {str(data), str(data.resolve()), str(data.parent)}:
         assert root not in r.text
+
+
+def test_c_render_parameters_and_empty_observables_are_4xx(http: httpx.Client,
+                                                           tmp_path: Path):
+    """movie.mp4?fps=1e-300 reached the encoder as "-r 0" (a 500); observables.png of a
+    job recorded with `observables: []` asked matplotlib for 0 panels (a 500)."""
+    pytest.importorskip("matplotlib")
+    job = submit_job(http, scenario(n=30, steps=20, every=5))
+    assert wait_for(http, job["id"])["status"] == "succeeded"
+    movie = f"/v1/jobs/{job['id']}/render/movie.mp4"
+    for fps in (1e-300, 0.01, 0.0999, 121):
+        assert_problem(http.get(movie, params={"fps": fps}), 422, "query.fps")
+    slow = http.get(movie, params={"fps": 0.1, "width": 64, "height": 64}, timeout=120)
+    assert slow.status_code == 200, slow.text
+    assert slow.content[4:8] == b"ftyp"
+    (tmp_path / "slow.mp4").write_bytes(slow.content)
+    import imageio.v2 as imageio
+
+    with imageio.get_reader(tmp_path / "slow.mp4", format="FFMPEG") as reader:
+        assert reader.count_frames() == 5  # frames at steps 0, 5, .., 20
+        assert reader.get_meta_data()["fps"] == pytest.approx(0.1)
+
+    body = scenario(n=30, steps=20, every=5)
+    body["recording"]["observables"] = []
+    quiet = submit_job(http, body)
+    assert wait_for(http, quiet["id"])["status"] == "succeeded"
+    r = http.get(f"/v1/jobs/{quiet['id']}/render/observables.png", timeout=120)
+    problem = assert_problem(r, 404)
+    assert problem["type"].endswith("nothing-to-draw")
+    assert "no observables were recorded" in problem["detail"]
+    named = http.get(f"/v1/jobs/{quiet['id']}/render/observables.png",
+                     params={"names": "polarization"}, timeout=120)
+    assert_problem(named, 422, "query.names")

@@ -27,6 +27,7 @@ from starlette.concurrency import run_in_threadpool
 from flocklab.schemas import FieldError
 from flocklab.service.jobs import Job
 from flocklab.service.jobs.disk import scrub_paths
+from flocklab.service.render.limits import MAX_FPS, MIN_FPS
 
 from ..deps import JobId, RuntimeDep
 from ..problems import ProblemError, invalid
@@ -109,7 +110,8 @@ async def movie(
     request: Request, job_id: JobId, runtime: RuntimeDep,
     width: Annotated[int, Query(ge=64, le=1920, description="Width in pixels.")] = 640,
     height: Annotated[int, Query(ge=64, le=1920, description="Height in pixels.")] = 640,
-    fps: Annotated[float, Query(gt=0, le=120, allow_inf_nan=False)] = 20.0,
+    fps: Annotated[float, Query(ge=MIN_FPS, le=MAX_FPS, allow_inf_nan=False,
+                                description="Frames per second.")] = 20.0,
     stride: Annotated[int, Query(ge=1, le=2**31, description="Every k-th frame.")] = 1,
     field: FieldMode = "auto", edges: Edges = None, overlays: Overlays = True,
 ) -> FileResponse:
