@@ -230,6 +230,9 @@ class Sweep(Strict):
                 if p == q or p.startswith(q + ".") or q.startswith(p + "."):
                     raise ValueError(f"axes: the paths {q!r} and {p!r} overlap (each field "
                                      "may be swept by one axis only)")
+        clash = self._column_clash()
+        if clash:
+            raise ValueError(clash)
         if self._replicas_axis() and "replicas" in self.model_fields_set:
             raise ValueError("give 'replicas' either as a field or as an axis, not both")
         for a in self.axis_entries():
@@ -250,6 +253,33 @@ class Sweep(Strict):
             raise ValueError(f"the sweep expands to {n} runs, more than the limit of "
                              f"{MAX_RUNS}")
         return self
+
+    def _column_clash(self) -> str | None:
+        """Why two columns of one table would share a name (None: they do not). The
+        tables' columns (service/sweeps/tables.py): runs.csv run, point, <axis paths>,
+        replica, seed, status, <measures>; table.csv point, <axis paths>, <m>_mean, _sd,
+        _sem, _count; series.csv point, <axis paths>, step, time, <obs>_mean, _sd. A
+        top-level axis path ('name', 'time') can meet a measure or a fixed column, and a
+        reader of the CSV would then take one column for the other."""
+        axes = [a.path for a in self.axis_entries() if a.path != REPLICAS_PATH]
+        names = list(self.measure)
+        tables = {
+            "runs.csv": ["run", "point", *axes, "replica", "seed", "status", *names],
+            "table.csv": ["point", *axes, *(f"{n}_{s}" for n in names
+                                            for s in ("mean", "sd", "sem", "count"))],
+            "series.csv": ["point", *axes, "step", "time",
+                           *(f"{o}_{s}" for o in self.series for s in ("mean", "sd"))]
+            if self.series else [],
+        }
+        for file, columns in tables.items():
+            seen: set[str] = set()
+            for c in columns:
+                if c in seen:
+                    return (f"{file} would have two columns named {c!r} (an axis path, a "
+                            "measure or a series named like another column): rename the "
+                            "measure, or sweep a deeper path (e.g. 'time.steps')")
+                seen.add(c)
+        return None
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: SerializerFunctionWrapHandler):  # type: ignore[no-untyped-def]

@@ -4,6 +4,7 @@ code before its fix."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -108,3 +109,19 @@ def test_c_render_parameters_and_empty_observables_are_4xx(http: httpx.Client,
     named = http.get(f"/v1/jobs/{quiet['id']}/render/observables.png",
                      params={"names": "polarization"}, timeout=120)
     assert_problem(named, 422, "query.names")
+
+
+@pytest.mark.parametrize("change", [
+    # runs.csv: the axis 'name' and the measure 'name' (table.csv read the wrong one)
+    lambda s: (s["axes"].append({"path": "name", "values": ["a", "b"]}),
+               s["measure"].update(name={"observable": "polarization", "reduce": "final"})),
+    # series.csv: the axis 'time' and the fixed column 'time'
+    lambda s: s["axes"].append({"path": "time", "values": [{"steps": 40}, {"steps": 60}]}),
+])
+def test_d_duplicate_column_names_are_refused(http: httpx.Client, change):
+    """Sweeps whose tables would hold two columns of one name were accepted, their tables
+    then ambiguous (a reader by name took one column for the other)."""
+    spec = sweep_spec(etas=(1.0,), replicas=1, name="clash")
+    change(spec)
+    body = assert_problem(http.post("/v1/sweeps", json=spec), 422)
+    assert "two columns named" in json.dumps(body)
