@@ -26,7 +26,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from flocklab.schemas import FieldError
 from flocklab.schemas.problems import json_safe
 from flocklab.service.jobs.disk import is_disk_full
-from flocklab.service.jobs.problems import problem
+from flocklab.service.jobs.problems import bounded, problem
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 log = logging.getLogger("flocklab.api")
@@ -55,7 +55,7 @@ def invalid(errors: list[FieldError], detail: str | None = None) -> ProblemError
 
 def problem_response(body: dict[str, Any], request: Request | None = None,
                      headers: dict[str, str] | None = None) -> JSONResponse:
-    body = dict(body)
+    body = bounded(body)
     if request is not None:
         body.setdefault("instance", request.url.path)
         body = _without_data_dir(body, request)

@@ -125,3 +125,20 @@ def test_d_duplicate_column_names_are_refused(http: httpx.Client, change):
     change(spec)
     body = assert_problem(http.post("/v1/sweeps", json=spec), 422)
     assert "two columns named" in json.dumps(body)
+
+
+def test_e_problem_bodies_are_bounded(http: httpx.Client):
+    """3000 bad axes answered with 3000 errors (a 571 KB body at the body-size cap); a
+    200 KB preset name came back whole."""
+    spec = sweep_spec(name="many-bad-axes")
+    spec["axes"] = [{"path": f"model.p{i}", "values": [1]} for i in range(3000)]
+    r = http.post("/v1/sweeps", json=spec)
+    body = assert_problem(r, 422)
+    assert len(body["errors"]) == 20 and body["errors_total"] == 3000
+    assert [e["loc"] for e in body["errors"]] == [f"axes.{i}.path" for i in range(20)]
+    assert len(r.content) < 8_000
+
+    r = http.post("/v1/sweeps", json={**sweep_spec(), "base": None, "preset": "x" * 200_000})
+    body = assert_problem(r, 422, "preset")
+    assert len(r.content) < 8_000
+    assert "more characters)" in body["errors"][0]["msg"]
