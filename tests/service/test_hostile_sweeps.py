@@ -5,6 +5,7 @@ code before its fix."""
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -22,7 +23,10 @@ from .test_sweeps import SWEEP_ENV, submit, sweep_spec, wait_sweep
 
 @pytest.fixture(scope="module")
 def hostile_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    s = ServerProcess(tmp_path_factory.mktemp("hostile") / "data", env=SWEEP_ENV).start()
+    # Bodies up to 4 MiB: room for the 1.1 MB attack body.
+    env = {**SWEEP_ENV, "FLOCKLAB_MAX_BODY_BYTES": str(4 * 2**20),
+           "FLOCKLAB_MAX_JSON_BYTES": str(4 * 2**20)}
+    s = ServerProcess(tmp_path_factory.mktemp("hostile") / "data", env=env).start()
     try:
         yield s
     finally:
@@ -128,17 +132,46 @@ def test_d_duplicate_column_names_are_refused(http: httpx.Client, change):
 
 
 def test_e_problem_bodies_are_bounded(http: httpx.Client):
-    """3000 bad axes answered with 3000 errors (a 571 KB body at the body-size cap); a
-    200 KB preset name came back whole."""
+    """Thousands of bad axes answered with an error each (571 KB bodies); a 200 KB preset
+    name came back whole."""
     spec = sweep_spec(name="many-bad-axes")
-    spec["axes"] = [{"path": f"model.p{i}", "values": [1]} for i in range(3000)]
+    spec["axes"] = [{"zip": [{"path": f"model.p{j}", "values": []} for j in range(64)]}
+                    for _ in range(64)]
     r = http.post("/v1/sweeps", json=spec)
     body = assert_problem(r, 422)
-    assert len(body["errors"]) == 20 and body["errors_total"] == 3000
-    assert [e["loc"] for e in body["errors"]] == [f"axes.{i}.path" for i in range(20)]
+    assert len(body["errors"]) == 20 and body["errors_total"] == 64 * 64
+    assert [e["loc"] for e in body["errors"]] == [f"axes.0.zip.{j}.values" for j in range(20)]
     assert len(r.content) < 8_000
 
     r = http.post("/v1/sweeps", json={**sweep_spec(), "base": None, "preset": "x" * 200_000})
     body = assert_problem(r, 422, "preset")
     assert len(r.content) < 8_000
     assert "more characters)" in body["errors"][0]["msg"]
+
+
+def _timed_post(http: httpx.Client, body: bytes) -> tuple[httpx.Response, float]:
+    t0 = time.monotonic()
+    r = http.post("/v1/sweeps", content=body, headers={"Content-Type": "application/json"})
+    return r, time.monotonic() - t0
+
+
+def test_f_many_axes_answered_in_under_a_second(http: httpx.Client):
+    """The axis-overlap check compared every pair of paths: a 1.1 MB body (28,000 axes)
+    cost 92 s of CPU before its 422."""
+    spec = sweep_spec(name="many-axes")
+    spec["axes"] = [{"path": f"model.p{i}", "values": [1]} for i in range(28_000)]
+    raw = json.dumps(spec).encode()
+    assert len(raw) > 1_100_000
+    r, seconds = _timed_post(http, raw)
+    assert_problem(r, 422, "axes")
+    assert seconds < 1.0, seconds
+
+    # The most entries the limits allow (64 zip axes of 64 paths), the last two overlapping:
+    # every pair is looked at, and the overlap is found.
+    spec["axes"] = [{"zip": [{"path": f"model.p{i}.q{j}", "values": [1]} for j in range(64)]}
+                    for i in range(64)]
+    spec["axes"][-1]["zip"][-1]["path"] = "model.p0"
+    r, seconds = _timed_post(http, json.dumps(spec).encode())
+    body = assert_problem(r, 422)
+    assert "'model.p0.q0' and 'model.p0' overlap" in json.dumps(body)
+    assert seconds < 1.0, seconds
