@@ -32,11 +32,13 @@ from typing import Annotated, Any, Literal
 from pydantic import (
     Discriminator,
     Field,
+    SerializerFunctionWrapHandler,
     StrictStr,
     Tag,
     ValidationError,
     ValidationInfo,
     field_validator,
+    model_serializer,
     model_validator,
 )
 
@@ -53,6 +55,12 @@ MAX_RUNS = 100_000
 MAX_REPORTED = 20
 # The pseudo-path that sets the replica count per grid point (in a plain or zip axis).
 REPLICAS_PATH = "replicas"
+# The most axes of a sweep, and of paths in one zip axis: 2^17 > MAX_RUNS, so at most 16
+# axes can have two values or more; the bound keeps a hostile body's checks small.
+MAX_AXES = 64
+# The longest axis path: a scenario's deepest field (an explicit position's component) is
+# far shorter; the bound keeps the overlap check linear in the body.
+MAX_PATH_CHARS = 200
 # Column names of runs.csv / table.csv / series.csv that a measure may not take.
 RESERVED_COLUMNS = frozenset({"run", "point", "replica", "seed", "status", "step", "time"})
 _MEASURE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -88,7 +96,8 @@ class SweepError(ValueError):
 class AxisValues(Strict):
     """One swept field: a dotted path into the scenario and the values it takes."""
 
-    path: StrictStr = Field(description="Dotted field path into the scenario, e.g. "
+    path: StrictStr = Field(max_length=MAX_PATH_CHARS, description="Dotted field path "
+                            "into the scenario, e.g. "
                             "'model.eta', 'initial.N', 'space.L'; or 'replicas' (replicas "
                             "per grid point).", examples=["model.eta"])
     values: list[Any] = Field(description="The values, in order (any JSON values).")
@@ -112,8 +121,9 @@ class AxisValues(Strict):
 class ZipAxis(Strict):
     """Several paths varied together: the i-th values of every list form one grid value."""
 
-    zip: list[AxisValues] = Field(min_length=1, description="Paths varied together; their "
-                                  "value lists must have equal lengths.")
+    zip: list[AxisValues] = Field(min_length=1, max_length=MAX_AXES, description="Paths "
+                                  "varied together; their value lists must have equal "
+                                  "lengths.")
 
     @model_validator(mode="after")
     def _equal_lengths(self) -> ZipAxis:
@@ -207,8 +217,9 @@ class Sweep(Strict):
                                      "(see `flocklab presets`).")
     overrides: dict[str, Any] | None = Field(default=None, description="Merged into the "
                                              "preset (objects recursively).")
-    axes: list[Axis] = Field(default=[], description="The grid: the product over entries; "
-                             "a `zip` entry varies its paths together.")
+    axes: list[Axis] = Field(default=[], max_length=MAX_AXES, description="The grid: the "
+                             "product over entries; a `zip` entry varies its paths "
+                             "together.")
     replicas: PositiveInt = Field(default=1, le=MAX_RUNS, description="Runs per grid point "
                                   "(seed + k, k = 0 .. replicas - 1), unless an axis sets "
                                   "'replicas' per point.")
@@ -307,12 +318,13 @@ class Sweep(Strict):
             raise ValueError("give exactly one of 'base' (a scenario) and 'preset'")
         if self.overrides is not None and self.preset is None:
             raise ValueError("'overrides' apply to a preset only")
-        paths = [a.path for a in self.axis_entries()]
-        for i, p in enumerate(paths):
-            for q in paths[:i]:
-                if p == q or p.startswith(q + ".") or q.startswith(p + "."):
-                    raise ValueError(f"axes: the paths {q!r} and {p!r} overlap (each field "
-                                     "may be swept by one axis only)")
+        overlap = _first_overlap([a.path for a in self.axis_entries()])
+        if overlap:
+            raise ValueError(f"axes: the paths {overlap[0]!r} and {overlap[1]!r} overlap "
+                             "(each field may be swept by one axis only)")
+        clash = self._column_clash()
+        if clash:
+            raise ValueError(clash)
         if self._replicas_axis() and "replicas" in self.model_fields_set:
             raise ValueError("give 'replicas' either as a field or as an axis, not both")
         for a in self.axis_entries():
@@ -333,6 +345,44 @@ class Sweep(Strict):
             raise ValueError(f"the sweep expands to {n} runs, more than the limit of "
                              f"{MAX_RUNS}")
         return self
+
+    def _column_clash(self) -> str | None:
+        """Why two columns of one table would share a name (None: they do not). The
+        tables' columns (service/sweeps/tables.py): runs.csv run, point, <axis paths>,
+        replica, seed, status, <measures>; table.csv point, <axis paths>, <m>_mean, _sd,
+        _sem, _count; series.csv point, <axis paths>, step, time, <obs>_mean, _sd. A
+        top-level axis path ('name', 'time') can meet a measure or a fixed column, and a
+        reader of the CSV would then take one column for the other."""
+        axes = [a.path for a in self.axis_entries() if a.path != REPLICAS_PATH]
+        names = list(self.measure)
+        tables = {
+            "runs.csv": ["run", "point", *axes, "replica", "seed", "status", *names],
+            "table.csv": ["point", *axes, *(f"{n}_{s}" for n in names
+                                            for s in ("mean", "sd", "sem", "count"))],
+            "series.csv": ["point", *axes, "step", "time",
+                           *(f"{o}_{s}" for o in self.series for s in ("mean", "sd"))]
+            if self.series else [],
+        }
+        for file, columns in tables.items():
+            seen: set[str] = set()
+            for c in columns:
+                if c in seen:
+                    return (f"{file} would have two columns named {c!r} (an axis path, a "
+                            "measure or a series named like another column): rename the "
+                            "measure, or sweep a deeper path (e.g. 'time.steps')")
+                seen.add(c)
+        return None
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler):  # type: ignore[no-untyped-def]
+        # (no return type, so pydantic keeps the fields' own serialization schema)
+        """The dump leaves out the `replicas` field when an axis sets the replicas: with
+        its default filled in, the stored sweep (the service's canonical form, its /spec)
+        would no longer validate ("give 'replicas' either as a field or as an axis")."""
+        data = handler(self)
+        if isinstance(data, dict) and self._replicas_axis():
+            data.pop("replicas", None)
+        return data
 
     # -- the grid -----------------------------------------------------------------------
 
@@ -489,10 +539,31 @@ class Sweep(Strict):
         return (None if problems else scenario), problems
 
 
+def _first_overlap(paths: list[str]) -> tuple[str, str] | None:
+    """The first pair (earlier, later) of paths naming the same field or one inside the
+    other ('model' and 'model.eta'), or None. Hashes each path's prefixes, so the cost is
+    linear in the paths' total length times their depth (bounded by MAX_PATH_CHARS),
+    where comparing every pair took 92 s for a 1.1 MB body."""
+    seen: set[str] = set()
+    under: dict[str, str] = {}  # a proper prefix -> the first path below it
+    for p in paths:
+        cuts = [i for i, c in enumerate(p) if c == "."]
+        for q in (p, *(p[:i] for i in cuts)):
+            if q in seen:
+                return q, p
+        if p in under:
+            return under[p], p
+        seen.add(p)
+        for i in cuts:
+            under.setdefault(p[:i], p)
+    return None
+
+
 def unknown_paths(doc: dict[str, Any], axes: Any) -> list[FieldError]:
     """An error for each axis path (in raw JSON `axes`) that names no field of `doc`, the
     base scenario with its defaults filled in."""
     errors = []
+    unlisted = 0
     for i, axis in enumerate(axes if isinstance(axes, list) else []):
         zipped = isinstance(axis, dict) and isinstance(axis.get("zip"), list)
         members = [(f"axes.{i}.zip.{j}", m) for j, m in enumerate(axis["zip"])] if zipped \
@@ -504,7 +575,14 @@ def unknown_paths(doc: dict[str, Any], axes: Any) -> list[FieldError]:
             try:
                 check_path(doc, path)
             except PathError as exc:
-                errors.append(FieldError(loc=f"{loc}.path", msg=str(exc), type="unknown_path"))
+                if len(errors) < MAX_REPORTED:
+                    errors.append(FieldError(loc=f"{loc}.path", msg=str(exc),
+                                             type="unknown_path"))
+                else:
+                    unlisted += 1
+    if unlisted:
+        errors.append(FieldError(loc="axes", type="unknown_path",
+                                 msg=f"{unlisted} more unknown paths not listed"))
     return errors
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import logging
 from http import HTTPStatus
+from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -25,7 +26,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from flocklab.schemas import FieldError
 from flocklab.schemas.problems import json_safe
 from flocklab.service.jobs.disk import is_disk_full
-from flocklab.service.jobs.problems import problem
+from flocklab.service.jobs.problems import bounded, problem
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 log = logging.getLogger("flocklab.api")
@@ -54,11 +55,28 @@ def invalid(errors: list[FieldError], detail: str | None = None) -> ProblemError
 
 def problem_response(body: dict[str, Any], request: Request | None = None,
                      headers: dict[str, str] | None = None) -> JSONResponse:
-    body = dict(body)
+    body = bounded(body)
     if request is not None:
         body.setdefault("instance", request.url.path)
+        body = _without_data_dir(body, request)
     return JSONResponse(json_safe(body), status_code=body["status"], headers=headers,
                         media_type=PROBLEM_MEDIA_TYPE)
+
+
+def _without_data_dir(body: dict[str, Any], request: Request) -> dict[str, Any]:
+    """`body` with the server's data directory replaced by `<data>` wherever a message
+    carries it: the last guard of the rule that no body shows a server path (the error
+    paths scrub their own messages; a new one that forgets is caught here)."""
+    settings = getattr(request.app.state, "settings", None)
+    if settings is None:
+        return body
+    text = json.dumps(json_safe(body))
+    roots = {str(settings.data_dir), str(Path(settings.data_dir).resolve())}
+    hits = sorted((r for r in roots if len(r) > 1 and json.dumps(r)[1:-1] in text),
+                  key=len, reverse=True)  # the longer first: one may contain the other
+    for root in hits:
+        text = text.replace(json.dumps(root)[1:-1], "<data>")
+    return json.loads(text) if hits else body
 
 
 async def _on_problem(request: Request, exc: Exception) -> JSONResponse:

@@ -9,6 +9,12 @@ from __future__ import annotations
 from typing import Any
 
 TYPE_PREFIX = "urn:flocklab:problem:"
+# What one problem body may carry: enough errors to see the pattern, strings long enough
+# for any message the service writes. A hostile body (thousands of bad axes, a 200 KB
+# preset name echoed back) made 571 KB answers; the rest is counted, not listed.
+MAX_ERRORS = 20
+MAX_DETAIL_CHARS = 2000
+MAX_FIELD_CHARS = 500
 
 
 def problem(slug: str, title: str, status: int, detail: str | None = None, **extra: Any
@@ -29,3 +35,25 @@ def cluster_problem(exc: Any) -> dict[str, Any]:
                    if isinstance(exc, ClusterUnavailable) else
                    ("cluster-task-lost", "Ray task lost"))
     return problem(slug, title, 503, str(exc), ray_address=exc.address)
+
+
+def bounded(body: dict[str, Any]) -> dict[str, Any]:
+    """`body` within the size limits: the first MAX_ERRORS `errors` (`errors_total`
+    counts them all), `detail` and each error's fields cut to MAX_DETAIL_CHARS and
+    MAX_FIELD_CHARS characters (the cut is said in the text)."""
+    out = dict(body)
+    if isinstance(out.get("detail"), str):
+        out["detail"] = _cut(out["detail"], MAX_DETAIL_CHARS)
+    errors = out.get("errors")
+    if isinstance(errors, list):
+        if len(errors) > MAX_ERRORS:
+            out["errors_total"] = len(errors)
+        out["errors"] = [{k: _cut(v, MAX_FIELD_CHARS) if isinstance(v, str) else v
+                          for k, v in e.items()} if isinstance(e, dict) else e
+                         for e in errors[:MAX_ERRORS]]
+    return out
+
+
+def _cut(text: str, limit: int) -> str:
+    return text if len(text) <= limit else (
+        f"{text[:limit]}... ({len(text) - limit} more characters)")

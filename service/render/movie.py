@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .errors import PlottingUnavailable, RenderInputError
 from .figure import new_figure
+from .limits import MAX_FPS, MIN_FPS
 from .run_data import RunData
 from .snapshot import Scene, SnapshotOptions, View, drawn_points, make_view
 
@@ -25,8 +26,8 @@ def write_movie(run: RunData, out: Path, opts: SnapshotOptions, *, fps: float = 
     suffix = Path(out).suffix.lower()
     if suffix not in MOVIE_FORMATS:
         raise RenderInputError(f"{out}: a movie is .mp4 or .gif")
-    if not 0 < fps <= 120:
-        raise RenderInputError(f"fps {fps} is outside (0, 120]", loc="fps")
+    if not MIN_FPS <= fps <= MAX_FPS:
+        raise RenderInputError(f"fps {fps:g} is outside {MIN_FPS:g}..{MAX_FPS:g}", loc="fps")
     if stride < 1:
         raise RenderInputError("stride must be >= 1", loc="stride")
     opts.check()

@@ -27,9 +27,9 @@ def draw_observables(fig: Any, run: RunData, names: list[str] | None, width: int
     """Panels of the named observables against time; returns the names drawn."""
     check_size(width, height)
     obs = run.observables
-    if not obs:
-        raise RenderInputError(f"{run.folder}: no observables were recorded")
     names = names or default_observables(run)
+    if not names:  # nothing but step and time: recording.observables = [] (or no file)
+        raise RenderInputError(f"{run.folder.name}: no observables were recorded", status=404)
     unknown = [n for n in names if n not in obs or n in ("step", "time")]
     if unknown:
         known = ", ".join(n for n in obs if n not in ("step", "time"))

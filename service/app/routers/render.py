@@ -26,6 +26,8 @@ from starlette.concurrency import run_in_threadpool
 
 from flocklab.schemas import FieldError
 from flocklab.service.jobs import Job
+from flocklab.service.jobs.disk import scrub_paths
+from flocklab.service.render.limits import MAX_FPS, MIN_FPS
 
 from ..deps import JobId, RuntimeDep
 from ..problems import ProblemError, invalid
@@ -108,7 +110,8 @@ async def movie(
     request: Request, job_id: JobId, runtime: RuntimeDep,
     width: Annotated[int, Query(ge=64, le=1920, description="Width in pixels.")] = 640,
     height: Annotated[int, Query(ge=64, le=1920, description="Height in pixels.")] = 640,
-    fps: Annotated[float, Query(gt=0, le=120, allow_inf_nan=False)] = 20.0,
+    fps: Annotated[float, Query(ge=MIN_FPS, le=MAX_FPS, allow_inf_nan=False,
+                                description="Frames per second.")] = 20.0,
     stride: Annotated[int, Query(ge=1, le=2**31, description="Every k-th frame.")] = 1,
     field: FieldMode = "auto", edges: Edges = None, overlays: Overlays = True,
 ) -> FileResponse:
@@ -202,17 +205,20 @@ async def _draw(slots: asyncio.Semaphore, what: str, folder: Path, target: Path,
 
 
 def _failure(code: int | None, out: bytes, err: bytes) -> ProblemError:
+    """The problem for a failed draw. The worker's messages name the folder (they are the
+    CLI's too, where a path helps): clients never see server paths, so they are scrubbed."""
     try:
         body = json.loads(out.decode().strip().splitlines()[-1])
     except (ValueError, IndexError):
         body = None
+    if code in (2, 3) and isinstance(body, dict):
+        detail = scrub_paths(str(body.get("detail")))
     if code == 2 and isinstance(body, dict):
         status = int(body.get("status", 422))
         if status == 404:
-            return ProblemError(404, "nothing-to-draw", "Nothing to draw", body["detail"])
+            return ProblemError(404, "nothing-to-draw", "Nothing to draw", detail)
         loc = f"query.{body['loc']}" if body.get("loc") else "query"
-        return invalid([FieldError(loc=loc, msg=body["detail"], type="value_error")])
+        return invalid([FieldError(loc=loc, msg=detail, type="value_error")])
     if code == 3 and isinstance(body, dict):
-        return ProblemError(503, "plotting-unavailable", "Plotting unavailable",
-                            body["detail"])
+        return ProblemError(503, "plotting-unavailable", "Plotting unavailable", detail)
     raise RuntimeError(f"render worker failed ({code}): {err.decode()[-2000:]}")
