@@ -149,6 +149,12 @@ class Supervisor:
         return [w.process.pid for w in self._workers if w.process.pid is not None]
 
     @property
+    def _resumes_jobs(self) -> bool:
+        """Whether a job's next attempt resumes from its lost one's checkpoint: on local
+        workers (a Ray task runs on a node that may be gone, and starts over)."""
+        return self.config.executor.kind == "local"
+
+    @property
     def alive(self) -> bool:
         return self._thread.is_alive()
 
@@ -156,7 +162,8 @@ class Supervisor:
 
     def _run(self) -> None:
         self.results.sweep_attempts(keep=self.store.unfinished_ids("sweep"),
-                                    keep_checkpoints=self.store.unfinished_ids("job"))
+                                    keep_checkpoints=self.store.unfinished_ids("job")
+                                    if self._resumes_jobs else ())
         self._reap(startup=True)
         while not self._stopping.is_set():
             try:
@@ -288,7 +295,8 @@ class Supervisor:
                    and job.attempts < self.config.max_attempts)
         # A sweep's retry resumes from its finished runs, a job's from its checkpoint.
         if not (retried and a.kind == "sweep"):
-            self.results.discard_attempt(a.job_id, a.token, keep_checkpoint=retried)
+            self.results.discard_attempt(a.job_id, a.token,
+                                         keep_checkpoint=retried and self._resumes_jobs)
         if a.stop_reason is not None:
             self._finish_stopped(a)
             return
@@ -349,7 +357,7 @@ class Supervisor:
             out_dir = self.results.adopt_attempt(job.id, job.lease_token)
         else:
             out_dir = self.results.attempt_dir(job.id, job.lease_token)
-            if self.config.executor.kind == "local":
+            if self._resumes_jobs:
                 resume = self.results.adopt_checkpoint(job.id, job.lease_token)
         order = {
             "job_id": job.id,
@@ -486,7 +494,7 @@ class Supervisor:
                 # it left one, else from scratch (a sweep keeps its folder, which its
                 # next attempt adopts to skip finished runs).
                 self.results.discard_attempt(w.attempt.job_id, w.attempt.token,
-                                             keep_checkpoint=True)
+                                             keep_checkpoint=self._resumes_jobs)
         self._workers.clear()
 
 

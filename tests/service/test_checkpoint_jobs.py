@@ -3,13 +3,15 @@ killed with SIGKILL, or the whole API killed and restarted on the same data dire
 the job goes on from its last checkpoint, not from step 0, says so in its events
 (`resumed_from_step`), and ends with the artifacts of the same scenario run uninterrupted
 by `flocklab run`, bit for bit (every dataset of trajectory.h5, observables.csv, the
-summary but for its timings)."""
+summary but for its timings). A checkpoint damaged meanwhile is refused: the job runs
+again from step 0, with a note, to the same bits."""
 
 from __future__ import annotations
 
 import json
 import os
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -116,23 +118,60 @@ def test_a_job_whose_worker_is_killed_resumes_from_its_checkpoint_bit_identical(
     assert [e["steps_done"] for e in resumed] == sorted(e["steps_done"] for e in resumed)
 
 
-@pytest.mark.slow
-def test_a_job_of_a_killed_service_resumes_after_restart_bit_identical(make_server, tmp_path):
-    data = tmp_path / "data"
+def _kill_service_mid_job(make_server, data: Path, seed: int) -> str:
+    """Submit the job, SIGKILL the API once it checkpointed, wait for its orphaned worker
+    to stop (its run lands stopped, checkpoint kept); the job's id."""
     s1 = make_server(data_dir=data)
     with httpx.Client(base_url=s1.url, timeout=30) as http:
         job = submit(http, {"scenario": SCENARIO})
-        _wait_checkpoint(data, job["id"], random.Random(2))
+        _wait_checkpoint(data, job["id"], random.Random(seed))
         workers = _workers(s1)
     s1.kill()
-    # The orphaned worker stops at its next step; its run lands stopped, checkpoint kept.
     deadline = time.monotonic() + 30
     while any(_alive(p) for p in workers) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(_alive(p) for p in workers)
     assert _checkpoints(data, job["id"])
+    return job["id"]
+
+
+def _finish_on_a_new_service(make_server, data: Path, job_id: str) -> dict:
     s2 = make_server(data_dir=data)
     with httpx.Client(base_url=s2.url, timeout=30) as http:
-        done = wait_for(http, job["id"], timeout=180)
+        return wait_for(http, job_id, timeout=180)
+
+
+@pytest.mark.slow
+def test_a_job_of_a_killed_service_resumes_after_restart_bit_identical(make_server, tmp_path):
+    data = tmp_path / "data"
+    job_id = _kill_service_mid_job(make_server, data, seed=2)
+    done = _finish_on_a_new_service(make_server, data, job_id)
     assert done["error"] is None
     _assert_resumed(done, data, tmp_path)
+
+
+@pytest.mark.slow
+def test_a_corrupted_checkpoint_is_not_resumed_the_job_runs_again_from_step_0(
+        make_server, tmp_path):
+    data = tmp_path / "data"
+    job_id = _kill_service_mid_job(make_server, data, seed=3)
+    (ck,) = _checkpoints(data, job_id)
+    raw = bytearray(ck.read_bytes())
+    raw[len(raw) // 2] ^= 0xFF  # one flipped byte inside the arrays
+    ck.write_bytes(bytes(raw))
+    done = _finish_on_a_new_service(make_server, data, job_id)
+    assert done["status"] == "succeeded" and done["attempts"] == 2, done
+    assert done["resumed_from_step"] is None
+    job_dir = data / "results" / job_id
+    summary = json.loads((job_dir / "summary.json").read_text())
+    assert "resumed_from_step" not in summary
+    (note,) = summary.pop("notes")
+    assert "checkpoint was refused" in note and "corrupted" in note and "step 0" in note
+    assert str(data) not in note  # clients never see the data directory's paths
+    # The run from step 0 has the reference's bits; its summary but for the note, too.
+    summary.pop("backend_requested")
+    got = tmp_path / "got"
+    shutil.copytree(job_dir, got)
+    (got / "summary.json").write_text(json.dumps(summary))
+    assert_same_run(_reference(tmp_path, job_dir), got)
+    assert list((data / "results" / ".attempts").iterdir()) == []
