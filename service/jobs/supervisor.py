@@ -31,11 +31,12 @@ from pathlib import Path
 from typing import Any
 
 from ..sweeps.executors import ExecutorConfig
+from ..sweeps.tables import rebuild_tables
 from .disk import free_bytes
 from .joblog import JobLog
 from .limits import Limits
 from .problems import problem
-from .results import ResultStore
+from .results import SWEEP_FILES, ResultStore, checksums
 from .store import Job, JobStore
 from .worker import worker_main
 
@@ -294,15 +295,19 @@ class Supervisor:
         retried = (a.stop_reason is None and job is not None and not job.cancel_requested
                    and job.attempts < self.config.max_attempts)
         # A sweep's retry resumes from its finished runs, a job's from its checkpoint.
-        if not (retried and a.kind == "sweep"):
+        kept: dict[str, Any] = {}
+        if not retried:
+            kept = self._settle_output(a)
+        elif a.kind != "sweep":
             self.results.discard_attempt(a.job_id, a.token,
-                                         keep_checkpoint=retried and self._resumes_jobs)
+                                         keep_checkpoint=self._resumes_jobs)
         if a.stop_reason is not None:
-            self._finish_stopped(a)
+            self._finish_stopped(a, **kept)
             return
         if job is not None and job.cancel_requested:
             # Cancelled before the supervisor could pass the request on: never re-run it.
-            self.store.finish(a.job_id, a.token, "cancelled", steps_done=a.steps_done)
+            self.store.finish(a.job_id, a.token, "cancelled", steps_done=a.steps_done,
+                              **kept)
             self.on_change(a.job_id)
             return
         note = problem("worker-lost", "Worker process lost", 500,
@@ -313,8 +318,28 @@ class Supervisor:
         if job is not None and job.attempts < self.config.max_attempts:
             self.store.requeue(a.job_id, a.token, refund_attempt=False, note=note)
         else:
-            self.store.finish(a.job_id, a.token, "failed", error=note, steps_done=a.steps_done)
+            self.store.finish(a.job_id, a.token, "failed", error=note, steps_done=a.steps_done,
+                              **kept)
         self.on_change(a.job_id)
+
+    def _settle_output(self, a: _Attempt) -> dict[str, Any]:
+        """The output of an attempt that ends its job without a result of its own (its
+        worker killed or lost for the last time, or a problem): a job's is deleted; a
+        sweep's finished runs are kept, each once (the tables rebuilt from its journal),
+        so a cancel, a worker death or one failing run never throws them away. Returns
+        the store.finish arguments for the results."""
+        if a.kind == "sweep":
+            folder = self.results.attempt_dir(a.job_id, a.token)
+            try:
+                kept = rebuild_tables(folder)
+            except Exception:  # the runs stay lost, but the sweep still ends
+                log.exception("sweep %s: could not rebuild its tables", a.job_id)
+                kept = False
+            if kept and self.results.commit(a.job_id, a.token):
+                return {"has_results": True,
+                        "checksums": checksums(self.results.job_dir(a.job_id), SWEEP_FILES)}
+        self.results.discard_attempt(a.job_id, a.token)
+        return {}
 
     # -- jobs -----------------------------------------------------------------------------
 
@@ -383,9 +408,8 @@ class Supervisor:
             self.results.discard_attempt(a.job_id, a.token)
             return
         if "problem" in outcome:
-            self.results.discard_attempt(a.job_id, a.token)
             self.store.finish(a.job_id, a.token, "failed", error=outcome["problem"],
-                              steps_done=a.steps_done)
+                              steps_done=a.steps_done, **self._settle_output(a))
             self.on_change(a.job_id)
             return
         summary = outcome["summary"]
@@ -397,11 +421,13 @@ class Supervisor:
                           steps_done=done, runs_failed=summary.get("runs_failed"))
         self.on_change(a.job_id)
 
-    def _finish_stopped(self, a: _Attempt) -> None:
-        """A cancelled or timed-out attempt whose worker had to be killed."""
+    def _finish_stopped(self, a: _Attempt, **kept: Any) -> None:
+        """A cancelled or timed-out attempt whose worker had to be killed (`kept`: its
+        results, see _settle_output)."""
         status = "timed_out" if a.stop_reason == "timeout" else "cancelled"
         error = _timeout_problem(a) if status == "timed_out" else None
-        self.store.finish(a.job_id, a.token, status, error=error, steps_done=a.steps_done)
+        self.store.finish(a.job_id, a.token, status, error=error, steps_done=a.steps_done,
+                          **kept)
         self.on_change(a.job_id)
 
     def _apply_cancels(self) -> None:

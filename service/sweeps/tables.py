@@ -199,3 +199,22 @@ def atomic_write(path: Path, text: str, *, durable: bool = True) -> None:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def rebuild_tables(out_dir: Path) -> bool:
+    """Rewrite the tables of a sweep folder from its sweep.json and journal (runs.jsonl,
+    each finished run once); False when it holds no finished run. For a sweep whose
+    worker died before it could write them: the finished runs are kept, not thrown away."""
+    from .journal import read_journal
+
+    try:
+        sweep = Sweep.model_validate(json.loads((Path(out_dir) / SWEEP_FILE).read_text())
+                                     ["sweep"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return False  # no sweep.json yet: the attempt died before its first run
+    runs = sweep.expand()
+    records = {i: r for i, r in read_journal(out_dir).items() if i < len(runs)}
+    if not records:
+        return False
+    write_tables(Path(out_dir), sweep, runs, records)
+    return True

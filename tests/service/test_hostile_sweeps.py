@@ -5,6 +5,8 @@ code before its fix."""
 from __future__ import annotations
 
 import json
+import os
+import signal
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -18,7 +20,7 @@ from flocklab.service.serve import ServerProcess
 from .conftest import _cleanup
 from .svc_helpers import assert_problem, scenario, wait_for
 from .svc_helpers import submit as submit_job
-from .test_sweeps import SWEEP_ENV, submit, sweep_spec, wait_sweep
+from .test_sweeps import SWEEP_ENV, _worker_pids, submit, sweep_spec, wait_sweep
 
 
 @pytest.fixture(scope="module")
@@ -175,3 +177,68 @@ def test_f_many_axes_answered_in_under_a_second(http: httpx.Client):
     body = assert_problem(r, 422)
     assert "'model.p0.q0' and 'model.p0' overlap" in json.dumps(body)
     assert seconds < 1.0, seconds
+
+
+@pytest.fixture(scope="module")
+def long_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    """Runs of 0.2-0.6 s (N = 1000, 3000 steps), one worker: a sweep of 12 lasts seconds."""
+    env = {**SWEEP_ENV, "FLOCKLAB_MAX_SWEEP_AGENT_STEPS": "50000000"}
+    s = ServerProcess(tmp_path_factory.mktemp("hostile-long") / "data", env=env).start()
+    try:
+        yield s
+    finally:
+        _cleanup(s)
+
+
+def _kill_worker(server: ServerProcess) -> None:
+    workers = _worker_pids(server)
+    assert len(workers) == 1
+    os.kill(workers[0], signal.SIGKILL)
+
+
+def _assert_runs_kept(http: httpx.Client, server: ServerProcess, done: dict[str, Any]
+                      ) -> None:
+    """The sweep's finished runs are its results, each once, in the journal and tables."""
+    assert done["results"] == "available", done
+    runs = _table(http, done["id"], "runs")
+    status = runs["columns"].index("status")
+    completed = [row for row in runs["data"] if row[status] == "completed"]
+    assert len(runs["data"]) == 12 and len(completed) == done["runs_done"] >= 1
+    journal = [json.loads(line) for line in (server.data_dir / "results" / done["id"] /
+                                             "runs.jsonl").read_text().splitlines()
+               if line.strip()]
+    assert sorted({r["run"] for r in journal}) == sorted(row[0] for row in completed)
+    table = _table(http, done["id"], "table")
+    count = table["columns"].index("va_count")
+    assert sum(row[count] for row in table["data"]) == len(completed)
+
+
+def test_k_a_second_worker_loss_keeps_the_finished_runs(long_server: ServerProcess):
+    """Losing the worker on the last allowed attempt failed the sweep and deleted every
+    run it had finished."""
+    with httpx.Client(base_url=long_server.url, timeout=60) as http:
+        created = submit(http, sweep_spec(etas=(0.5, 1.0, 2.0, 3.0), replicas=3, n=1000,
+                                          steps=3000, name="lost-twice"))
+        first = wait_sweep(http, created["id"], until=lambda s: s["runs_done"] >= 2)
+        _kill_worker(long_server)
+        wait_sweep(http, created["id"], until=lambda s: s["attempts"] == 2 and s[
+            "status"] == "running" and s["runs_done"] > first["runs_done"])
+        _kill_worker(long_server)
+        done = wait_sweep(http, created["id"])
+        assert done["status"] == "failed" and done["error"]["type"].endswith("worker-lost")
+        assert first["runs_done"] < done["runs_done"] < 12
+        _assert_runs_kept(http, long_server, done)
+
+
+def test_k_a_cancel_then_a_worker_death_keeps_the_finished_runs(long_server: ServerProcess):
+    """A cancel followed by the worker's death (before it wrote its tables) deleted the
+    runs the sweep had finished."""
+    with httpx.Client(base_url=long_server.url, timeout=60) as http:
+        created = submit(http, sweep_spec(etas=(0.5, 1.0, 2.0, 3.0), replicas=3, n=1000,
+                                          steps=3000, name="cancel-kill"))
+        wait_sweep(http, created["id"], until=lambda s: s["runs_done"] >= 1)
+        assert http.post(f"/v1/sweeps/{created['id']}/cancel").status_code == 202
+        _kill_worker(long_server)
+        done = wait_sweep(http, created["id"])
+        assert done["status"] == "cancelled"
+        _assert_runs_kept(http, long_server, done)
