@@ -574,10 +574,15 @@ def make_visitor(pair, half: bool = False, dim: int = 2):
 
 @ti.func
 def within(d2, r2, inclusive: ti.template()):
-    """The neighbourhood test: |d|^2 <= r^2 or |d|^2 < r^2."""
+    """The neighbourhood test as an i32: |d|^2 <= r^2 (inclusive) or |d|^2 < r^2.
+    `inclusive` is a compile-time bool (one comparison compiled) or a runtime value
+    (nonzero: inclusive; a fused batch's replicas may differ)."""
     res = 0
-    if ti.static(inclusive):
-        res = ti.cast(d2 <= r2, ti.i32)
+    if ti.static(isinstance(inclusive, (bool, int))):
+        if ti.static(inclusive):
+            res = ti.cast(d2 <= r2, ti.i32)
+        else:
+            res = ti.cast(d2 < r2, ti.i32)
     else:
-        res = ti.cast(d2 < r2, ti.i32)
+        res = ti.select(inclusive != 0, ti.cast(d2 <= r2, ti.i32), ti.cast(d2 < r2, ti.i32))
     return res

@@ -12,7 +12,8 @@ The double integrator dr/dt = v, dv/dt = u(r, v) of M2/M3 (paper 000 eq. 1) is t
 y = (r, v), f = (v, u), moved by the `_pair` kernels (one launch for both arrays: a small
 run's step is mostly launches): its position stage takes the stage velocity as k and reads
 it before the velocity stage moves it. M4's single integrator r' = u(r) is one array.
-Semi-implicit Euler, the default, is fused into the force kernels of each family.
+Semi-implicit Euler, the default, is fused into the force kernels of each family;
+`nonfinite` is their test of a step's result.
 """
 
 import taichi as ti
@@ -95,6 +96,16 @@ def rk4_finish_pair(r0: nd, rk: nd, v0: nd, vs: nd, vk: nd, u: nd, h6: float, r_
             s += r_out[i, m] + v_out[i, m]  # NaN if any term is NaN or infinite
         if ti.math.isnan(s) or ti.math.isinf(s):
             ti.atomic_add(bad[0], 1)
+
+
+@ti.func
+def nonfinite(x, v):
+    """1 if the dim-vectors x or v (a state's position and velocity, say) hold a NaN or an
+    infinity, else 0: their sum does then."""
+    s = x[0] + x[1] + v[0] + v[1]
+    if ti.static(x.n == 3):
+        s += x[2] + v[2]
+    return ti.cast(ti.math.isnan(s) or ti.math.isinf(s), ti.i32)
 
 
 @ti.kernel

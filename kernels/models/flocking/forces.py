@@ -1,17 +1,13 @@
 """Taichi kernels of the double-integrator flocking models: the control law, one explicit
 step, the graph observables and the adaptive radius.
 
-Control law for agent i (paper 000 eq. 3; paper 002 eq. 3):
-  u_i = sum_{j in N_i} (v_j - v_i) + sum_{j : s_ij < R_ij} (V'(s_ij) / s_ij) (r_j - r_i)
-        [- grad V_i(r_i) - c_d v_i where the damping region holds]     (paper 002 only)
-with N_i from a fixed graph (CSR, potential never saturated: eq. 4-5), or metric: j in N_i
-iff s_ij < R_ij (or <=), the potential saturated at s >= R_ij (eq. 10), found on a grid
-(kernels/space/plane_grid.py) or, at small N, over all pairs, through one visitor interface.
-R_ij is
+The control law and its Euler step are law.py's (paper 000 eq. 3; paper 002 eq. 3-4);
+here the per-step schedule: N_i from a fixed graph (CSR, in agent-id order), or metric
+neighbours found on a grid (kernels/space/plane_grid.py) or, at small N, over all pairs,
+through one visitor interface, parallel over the agents of the flock. R_ij is
   uniform  R                                     (paper 000, section 5)
   own      R_i, agent i's adaptive radius        (paper 002, eq. 4 as printed)
   min      min(R_i, R_j)                         (a symmetric variant)
-Semi-implicit Euler (the default step): v' = v + dt u(r, v), r' = r + dt v'.
 `accel` kernels write u alone, for the RK4 stages (kernels/space/integrate.py).
 A non-finite result increments bad[0]; the caller raises SimulationDiverged.
 M2's kernels take the dimension `dim` (2 or 3) at compile time: the law needs only
@@ -29,25 +25,18 @@ import taichi as ti
 from ...space.blocks import make_cell_pass, make_sieved_visitor, n_cells
 from ...space.graph import find, link
 from ...space.grid import make_visitor, put, row, within
+from ...space.integrate import nonfinite
 from ...space.params import Slots
 from ...space.plane_grid import make_dense_visitor
-from . import potentials
+from . import law, potentials
+from .law import MIN, OWN
 from .navigation import make_navigation
 
 nd = ti.types.ndarray()
 # The force parameter array: dt, the potential's a and c, R^2 (uniform radius); M3's c_d,
 # V_min, the stuck speed squared and the radius floor.
 P = Slots("DT", "A", "C", "R2", "CD", "VMIN", "STUCK2", "FLOOR")
-UNIFORM, OWN, MIN = 0, 1, 2
-RADIUS_RULES = {"uniform": UNIFORM, "own": OWN, "min": MIN}
-NO_DAMPING, ABOVE_VMIN, BELOW_VMIN, EVERYWHERE = 0, 1, 2, 3
-DAMPING = {"above_vmin": ABOVE_VMIN, "below_vmin": BELOW_VMIN, "everywhere": EVERYWHERE}
 NEAREST_NONE = 1e300
-# Why a flocking step blew up, as both schedules word it.
-DIVERGED_CAUSE = (
-    "dt too large for the pair potential's stiffness, or two agents (or an agent and an "
-    "obstacle) at the same point"
-)
 
 
 @ti.func
@@ -60,14 +49,6 @@ def pair_radius2(rule: ti.template(), i, k, rad: ti.template(), prm: ti.template
         r = ti.min(rad[i], rad[k])
         r2 = r * r
     return r2
-
-
-@ti.func
-def nonfinite(x, v):
-    s = x[0] + x[1] + v[0] + v[1]  # NaN if any term is NaN or infinite
-    if ti.static(x.n == 3):
-        s += x[2] + v[2]
-    return ti.math.isnan(s) or ti.math.isinf(s)
 
 
 def make_all_pairs_visitor(pair):
@@ -106,51 +87,27 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
     @ti.func
     def pair(i, k, d, acc, S: ti.template()):
         vel, rad, prm = ti.static(S[0], S[1], S[2])
-        # Branch-free: acc = (sum_{N_i} v_j + sum_{s < R} f d, |N_i|); the alignment
-        # sum_{N_i} (v_j - v_i) is completed after the loop as sum v_j - |N_i| v_i.
-        s2 = d.dot(d)
         r2 = pair_radius2(rule, i, k, rad, prm)
-        other = k != i
-        w = ti.cast(within(s2, r2, inclusive) & other, float)  # j in N_i
-        # U_ij = V(s) below R, constant (no force) from R on; select drops f(0) = inf.
-        f = ti.select((s2 < r2) & other, potentials.force_factor(s2, prm[P.A]), 0.0)
-        t = ti.Vector.zero(float, dim + 1)
-        for c in ti.static(range(dim)):
-            t[c] = w * vel[k, c] + f * d[c]
-        t[dim] = w
-        return acc + t
+        return acc + law.metric_term(d, d.dot(d), r2, inclusive, k != i, row(vel, k, dim),
+                                     prm[P.A])
 
     visit = visitor(pair, search, dim)
 
     @ti.func
     def control(i, xi, vi, sums, prm: ti.template(), nav: ti.template(), OB: ti.template()):
-        """u_i from agent i's neighbour sums (sum v_j + sum f d, |N_i|)."""
-        acc = ti.Vector.zero(float, dim)
-        for c in ti.static(range(dim)):
-            acc[c] = sums[c]
-        acc -= sums[dim] * vi
+        """u_i from agent i's neighbour sums (sum v_j + sum f d, |N_i|), by the law."""
+        u = law.control(sums, vi)
         if ti.static(mission):
             nv = navigation(xi, nav, OB)
-            grad = ti.Vector.zero(float, dim)
-            for c in ti.static(range(dim)):
-                grad[c] = nv[1 + c]
-            acc -= grad
-            if ti.static(damping == EVERYWHERE):
-                acc -= prm[P.CD] * vi
-            elif ti.static(damping == ABOVE_VMIN):
-                if nv[0] > prm[P.VMIN]:
-                    acc -= prm[P.CD] * vi
-            elif ti.static(damping == BELOW_VMIN):
-                if nv[0] <= prm[P.VMIN]:
-                    acc -= prm[P.CD] * vi
-        return acc
+            u = law.mission_control(u, vi, ti.Vector([nv[1 + c] for c in ti.static(range(dim))]),
+                                    nv[0], damping, prm[P.VMIN], prm[P.CD])
+        return u
 
     @ti.func
     def euler_update(i, xi, vi, sums, OUT: ti.template(), prm: ti.template(),
                      nav: ti.template(), bad: ti.template(), OB: ti.template()):
         """Semi-implicit Euler into OUT = (pos_out, vel_out)."""
-        v = vi + prm[P.DT] * control(i, xi, vi, sums, prm, nav, OB)
-        x = xi + prm[P.DT] * v
+        x, v = law.euler(xi, vi, control(i, xi, vi, sums, prm, nav, OB), prm[P.DT])
         put(OUT[0], i, x)
         put(OUT[1], i, v)
         if nonfinite(x, v):
@@ -242,13 +199,12 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
 @ti.func
 def _csr_control(i, xi, vi, pos: ti.template(), vel: ti.template(), indptr: ti.template(),
                  indices: ti.template(), prm: ti.template()):
-    acc = ti.Vector.zero(float, xi.n)
+    """u_i of eq. 3 over agent i's neighbours in the graph (CSR), by the law."""
+    u = ti.Vector.zero(float, xi.n)
     for e in range(indptr[i], indptr[i + 1]):
         j = indices[e]
-        d = row(pos, j, xi.n) - xi
-        acc += row(vel, j, xi.n) - vi
-        acc += potentials.force_factor(d.dot(d), prm[P.A]) * d
-    return acc
+        u = law.graph_term(u, row(pos, j, xi.n) - xi, row(vel, j, xi.n), vi, prm[P.A])
+    return u
 
 
 @ti.kernel
@@ -258,8 +214,8 @@ def csr_euler(pos: nd, vel: nd, pos_out: nd, vel_out: nd, indptr: nd, indices: n
     for i in range(pos.shape[0]):
         xi = row(pos, i, dim)
         vi = row(vel, i, dim)
-        v = vi + prm[P.DT] * _csr_control(i, xi, vi, pos, vel, indptr, indices, prm)
-        x = xi + prm[P.DT] * v
+        x, v = law.euler(xi, vi, _csr_control(i, xi, vi, pos, vel, indptr, indices, prm),
+                         prm[P.DT])
         put(pos_out, i, x)
         put(vel_out, i, v)
         if nonfinite(x, v):
@@ -376,12 +332,9 @@ def radius_kernel(rule: int, inclusive: bool, search: str, dim: int = 2):
                start: nd, cid: nd, gf: nd, gi: nd):
         for i in range(pos.shape[0]):
             r = rad[i]
-            speed2 = vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1]
-            if ti.static(dim == 3):
-                speed2 += vel[i, 2] * vel[i, 2]
             new = r
-            if speed2 < prm[P.STUCK2] and mission[i, 0] > prm[P.VMIN]:
-                new = ti.max(0.5 * r, prm[P.FLOOR])
+            if law.stuck(row(vel, i, dim), mission[i, 0], prm[P.STUCK2], prm[P.VMIN]):
+                new = law.halved(r, prm[P.FLOOR])
                 if new < r:
                     ti.atomic_add(counts[0], 1)
             else:

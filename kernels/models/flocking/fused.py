@@ -53,21 +53,22 @@ from flocklab.schemas import Scenario
 from ... import runtime
 from ...replicas import FusedBatch, Snapshots
 from ...space.blocks import dense_cell, grid_row
-from ...space.cells import SPREAD, clear_cells, make_cell_sort
+from ...space.cells import SPREAD
 from ...space.graph import find_serial, union_serial
-from ...space.grid import max_cells_across, put, runaway_cause, widen
+from ...space.grid import put, runaway_cause, widen, within
 from ...space.initial import unit_rows
+from ...space.integrate import nonfinite
+from ...space.observables import TWO_PI, make_circular_spread
 from ...space.params import Slots
+from ...space.replica_cells import G_NX, G_NY, G_NZ, G_O, G_SPAN, G_W, bucket, make_replica_cells
+from . import law, potentials
 from . import observe as fo
-from . import potentials
-from .forces import DIVERGED_CAUSE
-from .navigation import fold_obstacle
+from .law import DAMPING, DIVERGED_CAUSE
+from .navigation import FAR
 from .topology import build_edges, to_csr
 
 nd = ti.types.ndarray()
-FAR = 1e300  # "no obstacle within reach", as kernels/models/flocking/navigation.py
 NEAREST_NONE = 1e300
-TWO_PI = 2 * np.pi
 HIST = fo.HIST_BINS + 1  # valency histogram columns (the last one: 16 and more)
 SNAP_DOUBLES = 4_000_000  # snapshot buffer for lambda_2 (32 MB), cut into launches above
 MODES = {"fixed": 0, "switching": 1, "mission": 2}
@@ -85,7 +86,6 @@ OORIGIN = (P.OX, P.OY, P.OZ)
 OLOW = (P.OBX0, P.OBY0, P.OBZ0)
 OHIGH = (P.OBX1, P.OBY1, P.OBZ1)
 OCELLS = (IP.ONX, IP.ONY, IP.ONZ)
-DAMPING = {"above_vmin": 1, "below_vmin": 2, "everywhere": 3}  # 0: none (M2)
 # Observable columns (energy: W or Q_reduced; q_constant: Q - Q_reduced).
 OBS = ("step", "mean_velocity_x", "mean_velocity_y", "velocity_disagreement",
        "velocity_disagreement_max", "speed_min", "speed_mean", "speed_max", "heading_spread",
@@ -98,6 +98,10 @@ OBS = ("step", "mean_velocity_x", "mean_velocity_y", "velocity_disagreement",
 COL = {name: k for k, name in enumerate(OBS)}
 N_OBS = len(OBS)
 MISSION_KEYS = OBS[18:28]
+# The batch's arrays, in the kernel's argument order.
+ARRAYS = ("aoff", "coff", "ooff", "prm", "iprm", "pos", "vel", "rad", "ps", "cell", "cstart",
+          "cidx", "parent", "csum", "mis", "arc_lo", "arc_hi", "ptr", "idx", "opos", "orad",
+          "ostart", "obs", "val", "snap", "sbase")
 
 
 def velocity_keys(dim: int) -> list[str]:
@@ -131,117 +135,9 @@ def _row(a: ti.template(), i, c0: ti.template(), dim: ti.template()):
     return ti.Vector([a[i, c0 + c] for c in ti.static(range(dim))], dt=float)
 
 
-# build_cells' grid vector: cells across each way (nz = 1 in 2D; nx = 0: all pairs, -1: the
-# swarm ran away; hashed: nx = bucket count, ny = -1), cell side, extent, then the origin.
-G_NX, G_NY, G_NZ, G_W, G_SPAN, G_O = range(6)
-
-
-@ti.func
-def _within(s2, r2, incl):
-    """|d|^2 <= r^2 (incl) or < r^2, as an i32."""
-    return ti.select(incl != 0, ti.cast(s2 <= r2, ti.i32), ti.cast(s2 < r2, ti.i32))
-
-
-@ti.func
-def _nonfinite(x, v):
-    s = x[0] + x[1] + v[0] + v[1]  # NaN if any term is NaN or infinite
-    if ti.static(x.n == 3):
-        s += x[2] + v[2]
-    return ti.cast(ti.math.isnan(s) or ti.math.isinf(s), ti.i32)
-
-
-@ti.func
-def _bucket(c, nb):
-    """The hashed bucket of the integer cell c among nb (as kernels/space/grid.py's
-    buckets: the 3D hash adds Teschner et al.'s third prime)."""
-    h = (ti.cast(c[0], ti.u32) * ti.u32(73856093)) ^ (ti.cast(c[1], ti.u32) * ti.u32(19349663))
-    if ti.static(c.n == 3):
-        h ^= ti.cast(c[2], ti.u32) * ti.u32(83492791)
-    h ^= h >> ti.u32(13)
-    return ti.cast(h % ti.cast(nb, ti.u32), ti.i32)
-
-
-@ti.func
-def _cells_for(ext, w):
-    """Cells of side w over a box of extent ext: prod (ext / w + 1) (a float: no overflow)."""
-    cells = (ext[0] / w + 1.0) * (ext[1] / w + 1.0)
-    if ti.static(ext.n == 3):
-        cells *= ext[2] / w + 1.0
-    return cells
-
-
-_cell_sort, _in_id_order = make_cell_sort()
-
-
-@ti.func
-def build_cells(a0, n, c0, cap, w0, src: ti.template(), may_hash: ti.template(),
-                dim: ti.template(), cell: ti.template(), cstart: ti.template(),
-                cidx: ti.template()):
-    """Cell list of the replica's agents at src (id order, rows a0 .. a0 + n, positions in
-    columns 0 .. dim): cidx[a0 + k] is the agent in slot k, slots in cell order and,
-    within a cell, in id order (a stable counting sort); cell c holds slots
-    cstart[c0 + c] .. cstart[c0 + c + 1]. Cells of side w0 numbered x fastest, then y, then
-    z, over the bounding box while that fits the replica's budget of `cap` cells; a
-    sprawling swarm (a pair blown apart by the 1/s^2 repulsion, say) gets `cap` hashed
-    buckets of the same cells (may_hash), or cells widened until they fit. Returns the
-    grid vector (G_NX ...): cells across = 0 when under three cells every way (visit all
-    pairs), -1 when the swarm ran away (or NaN); hashed: (cap, -1)."""
-    lo = _full(ti.math.inf, dim)
-    hi = _full(-ti.math.inf, dim)
-    for i in range(a0, a0 + n):
-        p = _row(src, i, 0, dim)
-        lo = ti.min(lo, p)
-        hi = ti.max(hi, p)
-    ext = hi - lo
-    w = w0
-    nx = 0
-    ny = 0
-    nz = 1
-    hashed = 0
-    span = ti.max(ext[0], ext[1])
-    if ti.static(dim == 3):
-        span = ti.max(span, ext[2])
-    if not (span < ti.static(max_cells_across(dim)) * w):  # NaN included
-        nx = -1
-    if nx == 0:
-        if _cells_for(ext, w) > cap:
-            if ti.static(may_hash):
-                hashed = 1
-            else:
-                while _cells_for(ext, w) > cap:
-                    w *= 2.0
-        if hashed:
-            nx = cap
-            ny = -1
-        else:
-            nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
-            ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
-            if ti.static(dim == 3):
-                nz = ti.cast(ti.floor(ext[2] / w), ti.i32) + 1
-            if nx < 3 and ny < 3 and nz < 3:
-                nx = 0
-    if nx > 0:
-        nb = nx * ny * nz
-        if hashed:
-            nb = cap
-        clear_cells(c0, nb, cstart)
-        for i in range(a0, a0 + n):
-            c = ti.Vector([ti.cast(ti.floor((src[i, a] - lo[a]) / w), ti.i32)
-                           for a in ti.static(range(dim))])
-            cc = 0
-            if hashed:
-                cc = _bucket(c, nb)
-            else:
-                cc = ti.max(ti.min(c[0], nx - 1), 0) + nx * ti.max(ti.min(c[1], ny - 1), 0)
-                if ti.static(dim == 3):
-                    cc += nx * ny * ti.max(ti.min(c[2], nz - 1), 0)
-            cell[i] = cc
-            cstart[c0 + cc + 1] = cstart[c0 + cc + 1] + 1
-        _cell_sort(a0, n, c0, nb, cell, cstart, cidx, ())
-    elif nx == 0:
-        _in_id_order(a0, n, cidx, ())
-    return ti.Vector([nx, ny, nz, w, span] + [lo[a] for a in ti.static(range(dim))],
-                     dt=float)
+# The replica cell lists (kernels/space/replica_cells.py) of the state (hashed buckets past
+# the cell budget) and of the closest-pair search (cells widened instead).
+_cells = {(dim, h): make_replica_cells(dim, may_hash=h) for dim in (2, 3) for h in (True, False)}
 
 
 def make_visit(pair, dim: int, by_id: bool = False):
@@ -274,7 +170,7 @@ def make_visit(pair, dim: int, by_id: bool = False):
             for t in range(3**dim):  # a runtime loop, not unrolled: less to compile
                 off = ti.Vector([t % 3 - 1, t // 3 % 3 - 1, t // 9 - 1])
                 c = ti.Vector([ti.cast(hc[a], ti.i32) + off[a] for a in ti.static(range(dim))])
-                bk = c0 + _bucket(c, nx)
+                bk = c0 + bucket(c, nx)
                 for m in range(a0 + cstart[bk], a0 + cstart[bk + 1]):
                     j = at(m, cidx)
                     same = True
@@ -324,7 +220,7 @@ def _fold_obstacles(b, x, acc, prm: ti.template(), iprm: ti.template(), opos: ti
         rk = grid_row(ostart, iprm[b, IP.OCOFF], c, r % 3 - 1, r // 3 - 1, xlo, xhi, shape,
                       dim)
         for o in range(rk[0], rk[1]):
-            acc = fold_obstacle(acc, _row(opos, o, 0, dim) - x, orad[o], rng, lam)
+            acc = law.fold_obstacle(acc, _row(opos, o, 0, dim) - x, orad[o], rng, lam)
     return acc
 
 
@@ -342,52 +238,25 @@ def navigation(b, x, prm: ti.template(), iprm: ti.template(), opos: ti.template(
     bsum = acc[0]
     gb = ti.Vector([acc[1 + c] for c in ti.static(range(dim))], dt=float)
     y = x - ti.Vector([prm[b, DEST[c]] for c in ti.static(range(dim))], dt=float)
-    a = y.dot(y)
     v = 0.0
     g = _full(0.0, dim)
     kappa = prm[b, P.KAPPA]
-    if kappa == 1.0:
-        dd = a + bsum
-        v = a / dd
-        g = (2.0 * bsum * y - a * gb) / (dd * dd)
+    if kappa == 1.0:  # a replica's kappa is a runtime value: both forms compiled
+        v, g = law.navigation_value(y, bsum, gb, kappa, True)
     else:
-        dd = ti.pow(a, kappa) + bsum
-        dk = ti.pow(dd, -1.0 / kappa)
-        v = a * dk
-        gd = 2.0 * kappa * ti.pow(a, kappa - 1.0) * y + gb
-        g = dk * 2.0 * y - (a / kappa) * (dk / dd) * gd
+        v, g = law.navigation_value(y, bsum, gb, kappa, False)
     return ti.Vector([v] + [g[c] for c in ti.static(range(dim))] + [acc[dim + 1]], dt=float)
 
 
 @ti.func
-def heading_spread(a0, n, ps: ti.template(), lo: ti.template(), hi: ti.template()):
-    """The shortest arc holding every heading atan2(v): 2 pi less the largest gap, by
-    n buckets over [0, 2 pi) (the largest gap spans a bucket boundary: exact)."""
-    res = 0.0
-    if n >= 2:
-        for k in range(a0, a0 + n):
-            lo[k] = ti.math.inf
-            hi[k] = -ti.math.inf
-        for k in range(a0, a0 + n):
-            th = ti.atan2(ps[k, 3], ps[k, 2])
-            a = th - TWO_PI * ti.floor(th / TWO_PI)
-            if a >= TWO_PI:
-                a -= TWO_PI
-            j = a0 + ti.min(ti.cast(a / TWO_PI * n, ti.i32), n - 1)
-            lo[j] = ti.min(lo[j], a)
-            hi[j] = ti.max(hi[j], a)
-        first = ti.math.inf
-        last = -ti.math.inf
-        gap = 0.0
-        for j in range(a0, a0 + n):
-            if lo[j] <= hi[j]:
-                if last > -ti.math.inf:
-                    gap = ti.max(gap, lo[j] - last)
-                else:
-                    first = lo[j]
-                last = hi[j]
-        res = TWO_PI - ti.max(gap, first + TWO_PI - last)
-    return res
+def _velocity_angle(k, S: ti.template()):
+    """atan2(v) of slot k (2D: the velocity in ps's columns 2 and 3)."""
+    ps = ti.static(S[0])
+    return ti.atan2(ps[k, 3], ps[k, 2])
+
+
+# The shortest arc holding every heading atan2(v) (kernels/space/observables.py).
+heading_spread = make_circular_spread(_velocity_angle)
 
 
 @ti.func
@@ -458,7 +327,7 @@ def velocity_stats(row, a0, n, ps: ti.template(), lo: ti.template(), hi: ti.temp
     if ti.static(dim == 3):
         obs[row, COL["heading_spread"]] = heading_spread_3d(a0, n, ps)
     else:
-        obs[row, COL["heading_spread"]] = heading_spread(a0, n, ps, lo, hi)
+        obs[row, COL["heading_spread"]] = heading_spread(a0, n, lo, hi, ti.static((ps,)))
     return 0.5 * kin
 
 
@@ -479,20 +348,13 @@ def advance_kernel(mode: int, dim: int = 2):
 
     @ti.func
     def force_pair(k, m, d, acc, q, ps: ti.template(), S: ti.template()):
-        # Branch-free, as kernels/models/flocking/forces.py: acc = (sum_{N_i} v_j + sum_{s < R}
-        # f d, |N_i|); the select drops f(0) = inf for k itself (a coincident pair keeps it).
-        s2 = d.dot(d)
-        r2 = pair_radius2(k, q, ps)
-        other = ti.cast(m != k, ti.i32)
-        w = ti.cast(_within(s2, r2, ti.cast(q[1], ti.i32)) & other, float)
-        f = ti.select((ti.cast(s2 < r2, ti.i32) & other) != 0,
-                      potentials.force_factor(s2, q[2]), 0.0)
-        t = ti.Vector([w * ps[m, V + c] + f * d[c] for c in ti.static(range(dim))] + [w])
-        return acc + t
+        """Slot m's term in slot k's sums, by the law (q: (R^2, inclusive, a, c))."""
+        return acc + law.metric_term(d, d.dot(d), pair_radius2(k, q, ps), ti.cast(q[1], ti.i32),
+                                     m != k, _row(ps, m, V, dim), q[2])
 
     @ti.func
     def radius_pair(k, m, d, acc, q, ps: ti.template(), S: ti.template()):
-        if m != k and _within(d.dot(d), pair_radius2(k, q, ps), ti.cast(q[1], ti.i32)):
+        if m != k and within(d.dot(d), pair_radius2(k, q, ps), ti.cast(q[1], ti.i32)):
             acc = ti.max(acc, ps[m, RAD])
         return acc
 
@@ -506,7 +368,7 @@ def advance_kernel(mode: int, dim: int = 2):
                 acc[1] = s2
                 acc[2] = ti.cast(m, float)
             r2 = pair_radius2(k, q, ps)
-            if _within(s2, r2, ti.cast(q[1], ti.i32)):
+            if within(s2, r2, ti.cast(q[1], ti.i32)):
                 acc[0] += 1.0
                 # own: j in N_i need not imply i in N_j, so every edge is joined from i.
                 if ti.static(mission) or m > k:
@@ -529,6 +391,7 @@ def advance_kernel(mode: int, dim: int = 2):
     visit_radius = make_visit(radius_pair, dim)
     visit_observe = make_visit(observe_pair, dim)
     visit_closest = make_visit(closest_pair, dim, by_id=True)
+    state_grid, closest_grid = _cells[dim, True], _cells[dim, False]
 
     @ti.func
     def closest_all_pairs(a0, n, ps: ti.template()):
@@ -565,7 +428,7 @@ def advance_kernel(mode: int, dim: int = 2):
         best = ti.math.vec3(NEAREST_NONE, a0, a0)
         done = False
         while not done:
-            g = build_cells(a0, n, c0, cap, w, ps, False, dim, cell, cstart, cidx)
+            g = closest_grid(a0, n, c0, cap, w, 0.0, ps, cell, cstart, cidx, ())
             nx = ti.cast(g[G_NX], ti.i32)
             best = ti.math.vec3(NEAREST_NONE, a0, a0)
             if nx <= 0:
@@ -732,146 +595,178 @@ def advance_kernel(mode: int, dim: int = 2):
                 if ti.static(mission):
                     snap[at + dim] = ps[k, RAD]
 
+    # The arrays of a window, as one compile-time tuple (its order: ARRAYS).
+    (AOFF, COFF, OOFF, PRM, IPRM, POS, VEL, RADII, PS, CELL, CSTART, CIDX, PARENT, CSUM, MIS,
+     ARC_LO, ARC_HI, PTR, IDX, OPOS, ORAD, OSTART, OBS, VAL, SNAP, SBASE) = range(len(ARRAYS))
+
+    @ti.func
+    def cells_across(g):
+        return ti.math.ivec3(ti.cast(g[G_NX], ti.i32), ti.cast(g[G_NY], ti.i32),
+                             ti.cast(g[G_NZ], ti.i32))
+
+    @ti.func
+    def load(b, s, a0, n, c0, cap, A: ti.template()):
+        """Replica b's prologue of step s: (live, g). The cell list of r(s) (switching, M3;
+        g: replica_cells' grid vector, all pairs without one), X(s) copied into slot
+        order (every visit reads it) and V_i at r(s) (M3). live 0: the swarm ran away
+        (recorded here)."""
+        prm, iprm, pos, vel, rad = ti.static(A[PRM], A[IPRM], A[POS], A[VEL], A[RADII])
+        ps, cell, cstart, cidx = ti.static(A[PS], A[CELL], A[CSTART], A[CIDX])
+        live = 1
+        g = ti.Vector([0.0, 0.0, 1.0, 0.0, 0.0] + [0.0 for _ in ti.static(range(dim))],
+                      dt=float)  # all pairs
+        gridded = False
+        if ti.static(not fixed):
+            gridded = iprm[b, IP.CELLS] != 0
+        if gridded:
+            w0 = prm[b, P.R] * ti.static(widen())
+            g = state_grid(a0, n, c0, cap, w0, 0.0, pos, cell, cstart, cidx, ())
+            if g[G_NX] < 0:
+                iprm[b, IP.BAD] = s
+                iprm[b, IP.CAUSE] = 1
+                prm[b, P.SPAN] = g[G_SPAN]
+                live = 0
+        else:
+            for k in range(n):
+                cidx[a0 + k] = a0 + k
+        if live:
+            hashed = g[G_NY] < 0
+            w = g[G_W]
+            for k in range(a0, a0 + n):
+                i = cidx[k]
+                for c in ti.static(range(dim)):
+                    ps[k, X + c] = pos[i, c]
+                    ps[k, V + c] = vel[i, c]
+                if ti.static(mission):
+                    ps[k, RAD] = rad[i]
+                if hashed:  # each slot's exact cell
+                    for c in ti.static(range(dim)):
+                        ps[k, HC + c] = ti.floor((pos[i, c] - g[G_O + c]) / w)
+            if ti.static(mission):  # V_i at r(s): read by all three passes of the step
+                for k in range(a0, a0 + n):
+                    put(A[MIS], k, navigation(b, _row(ps, k, X, dim), prm, iprm, A[OPOS],
+                                              A[ORAD], A[OSTART]))
+        return live, g
+
+    @ti.func
+    def observation(b, s, a0, n, c0, cap, g, q, A: ti.template()):
+        """The observables of X(s) into the replica's next row of obs."""
+        iprm = ti.static(A[IPRM])
+        row = A[OOFF][b] + iprm[b, IP.NOBS]
+        A[OBS][row, 0] = s
+        if ti.static(fixed):
+            observe_fixed(b, a0, n, c0, cap, row, A[PRM], A[PS], A[PTR], A[IDX], A[CELL],
+                          A[CSTART], A[CIDX], A[ARC_LO], A[ARC_HI], A[OBS])
+        else:
+            nc = cells_across(g)
+            observe_metric(b, a0, n, c0, nc[0], nc[1], nc[2], g[G_W], row, iprm[b, IP.NOBS],
+                           q, A[PRM], iprm, A[PS], A[CELL], A[CSTART], A[CIDX], A[PARENT],
+                           A[CSUM], A[ARC_LO], A[ARC_HI], A[MIS], A[OBS], A[VAL], A[SNAP],
+                           A[SBASE])
+        iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
+
+    @ti.func
+    def adapt(b, a0, n, c0, g, q, A: ti.template()):
+        """M3's radius, paper 002 eq. 4 by the law, synchronously (reads the slot copy,
+        writes rad in id order, then the copy)."""
+        prm, iprm, rad, ps, cidx = ti.static(A[PRM], A[IPRM], A[RADII], A[PS], A[CIDX])
+        nc = cells_across(g)
+        halved = 0
+        grown = 0
+        for k in range(a0, a0 + n):
+            r = ps[k, RAD]
+            new = r
+            if law.stuck(_row(ps, k, V, dim), A[MIS][k, 0], prm[b, P.STUCK2], prm[b, P.VMIN]):
+                new = law.halved(r, prm[b, P.FLOOR])
+                if new < r:
+                    halved += 1
+            else:
+                new = visit_radius(k, a0, n, c0, nc[0], nc[1], nc[2], r, q, ps, A[CELL],
+                                   A[CSTART], cidx, ti.static((A[PARENT],)))
+                if new > r:
+                    grown += 1
+            rad[cidx[k]] = new
+        for k in range(a0, a0 + n):
+            ps[k, RAD] = rad[cidx[k]]
+        iprm[b, IP.HALVED] = iprm[b, IP.HALVED] + halved
+        iprm[b, IP.GROWN] = iprm[b, IP.GROWN] + grown
+
+    @ti.func
+    def move(b, a0, n, c0, g, q, A: ti.template()):
+        """X(s + 1) by the law (u_i of eq. 3 [and paper 002's mission terms], semi-implicit
+        Euler), written in id order as we go: the visits read only the slot-order copy,
+        so the update stays synchronous (a fixed graph keeps id order). Returns 1 if a
+        new state is not finite."""
+        prm, iprm, ps, cidx, mis = ti.static(A[PRM], A[IPRM], A[PS], A[CIDX], A[MIS])
+        ptr, idx = ti.static(A[PTR], A[IDX])
+        nc = cells_across(g)
+        dt = prm[b, P.DT]
+        bad = 0
+        for k in range(a0, a0 + n):
+            i = k
+            if ti.static(not fixed):
+                i = cidx[k]
+            xi = _row(ps, k, X, dim)
+            vi = _row(ps, k, V, dim)
+            u = _full(0.0, dim)
+            if ti.static(fixed):
+                for e in range(ptr[i], ptr[i + 1]):
+                    j = idx[e]
+                    u = law.graph_term(u, _row(ps, j, X, dim) - xi, _row(ps, j, V, dim), vi,
+                                       q[2])
+            else:
+                acc = visit_force(k, a0, n, c0, nc[0], nc[1], nc[2], _full(0.0, dim + 1), q,
+                                  ps, A[CELL], A[CSTART], cidx, ti.static((A[PARENT],)))
+                u = law.control(acc, vi)
+            if ti.static(mission):
+                u = law.mission_control(u, vi, _row(mis, k, 1, dim), mis[k, 0],
+                                        iprm[b, IP.DAMP], prm[b, P.VMIN], prm[b, P.CD])
+            x, v = law.euler(xi, vi, u, dt)
+            put(A[POS], i, x)
+            put(A[VEL], i, v)
+            bad |= nonfinite(x, v)
+        return bad
+
+    @ti.func
+    def replica(b, s0, s1, A: ti.template()):
+        """Replica b from step s0 towards s1 (serially: its steps, then its agents)."""
+        aoff, coff, prm, iprm = ti.static(A[AOFF], A[COFF], A[PRM], A[IPRM])
+        a0 = aoff[b]
+        n = aoff[b + 1] - a0
+        c0 = coff[b]
+        cap = coff[b + 1] - c0 - 1
+        every = iprm[b, IP.EVERY]
+        # (uniform R^2, inclusive, a, c) of the pair terms
+        q = ti.math.vec4(prm[b, P.R2], iprm[b, IP.INCL], prm[b, P.A], prm[b, P.C])
+        iprm[b, IP.SNAP0] = iprm[b, IP.NOBS]
+        s = s0
+        while s < s1 and s <= iprm[b, IP.STEPS] and iprm[b, IP.BAD] < 0:
+            steps = iprm[b, IP.STEPS]
+            live, g = load(b, s, a0, n, c0, cap, A)
+            if live == 0:
+                break
+            if s % every == 0 or s == steps:  # an observation step
+                observation(b, s, a0, n, c0, cap, g, q, A)
+            if s < steps:
+                if ti.static(mission):
+                    # Eq. 4 at its cadence, before the step's motion.
+                    if iprm[b, IP.ADAPT] and s > 0 and s % iprm[b, IP.REVERY] == 0:
+                        adapt(b, a0, n, c0, g, q, A)
+                if move(b, a0, n, c0, g, q, A) != 0:
+                    iprm[b, IP.BAD] = s
+            s += 1
+
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, aoff: nd, coff: nd, ooff: nd, prm: nd, iprm: nd,
                 pos: nd, vel: nd, rad: nd, ps: nd, cell: nd, cstart: nd, cidx: nd,
-                parent: nd, csum: nd, mis: nd, arc_lo: nd, arc_hi: nd, ptr: nd, idx: nd, opos: nd,
-                orad: nd, ostart: nd, obs: nd, val: nd, snap: nd, sbase: nd):
+                parent: nd, csum: nd, mis: nd, arc_lo: nd, arc_hi: nd, ptr: nd, idx: nd,
+                opos: nd, orad: nd, ostart: nd, obs: nd, val: nd, snap: nd, sbase: nd):
+        A = ti.static((aoff, coff, ooff, prm, iprm, pos, vel, rad, ps, cell, cstart, cidx,
+                       parent, csum, mis, arc_lo, arc_hi, ptr, idx, opos, orad, ostart, obs,
+                       val, snap, sbase))
         for t in range((aoff.shape[0] - 1) * SPREAD):
             if t % SPREAD == 0:  # one replica per CPU task
-                b = t // SPREAD
-                a0 = aoff[b]
-                n = aoff[b + 1] - a0
-                c0 = coff[b]
-                cap = coff[b + 1] - c0 - 1
-                every = iprm[b, IP.EVERY]
-                dt = prm[b, P.DT]
-                # (uniform R^2, inclusive, a, c) of the pair terms
-                q = ti.math.vec4(prm[b, P.R2], iprm[b, IP.INCL], prm[b, P.A], prm[b, P.C])
-                iprm[b, IP.SNAP0] = iprm[b, IP.NOBS]
-                s = s0
-                while s < s1 and s <= iprm[b, IP.STEPS] and iprm[b, IP.BAD] < 0:
-                    steps = iprm[b, IP.STEPS]
-                    graph = s % every == 0 or s == steps  # an observation step
-                    nx = 0
-                    ny = 0
-                    nz = 1
-                    w = 0.0
-                    o = _full(0.0, dim)
-                    if ti.static(not fixed):
-                        if iprm[b, IP.CELLS]:
-                            w0 = prm[b, P.R] * ti.static(widen())
-                            g = build_cells(a0, n, c0, cap, w0, pos, True, dim, cell, cstart,
-                                            cidx)
-                            if g[G_NX] < 0:
-                                iprm[b, IP.BAD] = s
-                                iprm[b, IP.CAUSE] = 1
-                                prm[b, P.SPAN] = g[G_SPAN]
-                                break
-                            nx = ti.cast(g[G_NX], ti.i32)
-                            ny = ti.cast(g[G_NY], ti.i32)
-                            nz = ti.cast(g[G_NZ], ti.i32)
-                            w = g[G_W]
-                            for c in ti.static(range(dim)):
-                                o[c] = g[G_O + c]
-                        else:
-                            for k in range(n):
-                                cidx[a0 + k] = a0 + k
-                    else:
-                        for k in range(n):
-                            cidx[a0 + k] = a0 + k
-                    for k in range(a0, a0 + n):  # X(s) in slot order: every visit reads it
-                        i = cidx[k]
-                        for c in ti.static(range(dim)):
-                            ps[k, X + c] = pos[i, c]
-                            ps[k, V + c] = vel[i, c]
-                        if ti.static(mission):
-                            ps[k, RAD] = rad[i]
-                        if ny < 0:  # hashed: each slot's exact cell
-                            for c in ti.static(range(dim)):
-                                ps[k, HC + c] = ti.floor((pos[i, c] - o[c]) / w)
-                    if ti.static(mission):  # V_i at r(s): read by all three passes below
-                        for k in range(a0, a0 + n):
-                            nv = navigation(b, _row(ps, k, X, dim), prm, iprm, opos, orad,
-                                            ostart)
-                            put(mis, k, nv)
-                    if graph:
-                        row = ooff[b] + iprm[b, IP.NOBS]
-                        obs[row, 0] = s
-                        if ti.static(fixed):
-                            observe_fixed(b, a0, n, c0, cap, row, prm, ps, ptr, idx, cell,
-                                          cstart, cidx, arc_lo, arc_hi, obs)
-                        else:
-                            observe_metric(b, a0, n, c0, nx, ny, nz, w, row, iprm[b, IP.NOBS],
-                                           q, prm, iprm, ps, cell, cstart, cidx, parent, csum,
-                                           arc_lo, arc_hi, mis, obs, val, snap, sbase)
-                        iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
-                    if s < steps:
-                        if ti.static(mission):
-                            # Eq. 4 at its cadence, before the step's motion, synchronously
-                            # (reads the slot copy, writes rad in id order).
-                            if iprm[b, IP.ADAPT] and s > 0 and s % iprm[b, IP.REVERY] == 0:
-                                halved = 0
-                                grown = 0
-                                for k in range(a0, a0 + n):
-                                    r = ps[k, RAD]
-                                    vk = _row(ps, k, V, dim)
-                                    v2 = vk.dot(vk)
-                                    new = r
-                                    if v2 < prm[b, P.STUCK2] and mis[k, 0] > prm[b, P.VMIN]:
-                                        new = ti.max(0.5 * r, prm[b, P.FLOOR])
-                                        if new < r:
-                                            halved += 1
-                                    else:
-                                        new = visit_radius(k, a0, n, c0, nx, ny, nz, r, q, ps,
-                                                           cell, cstart, cidx,
-                                                           ti.static((parent,)))
-                                        if new > r:
-                                            grown += 1
-                                    rad[cidx[k]] = new
-                                for k in range(a0, a0 + n):
-                                    ps[k, RAD] = rad[cidx[k]]
-                                iprm[b, IP.HALVED] = iprm[b, IP.HALVED] + halved
-                                iprm[b, IP.GROWN] = iprm[b, IP.GROWN] + grown
-                        bad = 0
-                        for k in range(a0, a0 + n):
-                            # X(s + 1) is written in id order as we go: the visits read
-                            # only the slot-order copy, so the update stays synchronous.
-                            # (A fixed graph keeps id order; its observation reuses cidx.)
-                            i = k
-                            if ti.static(not fixed):
-                                i = cidx[k]
-                            xi = _row(ps, k, X, dim)
-                            vi = _row(ps, k, V, dim)
-                            u = _full(0.0, dim)
-                            if ti.static(fixed):
-                                for e in range(ptr[i], ptr[i + 1]):
-                                    j = idx[e]
-                                    d = _row(ps, j, X, dim) - xi
-                                    u += _row(ps, j, V, dim) - vi
-                                    u += potentials.force_factor(d.dot(d), q[2]) * d
-                            else:
-                                acc = visit_force(k, a0, n, c0, nx, ny, nz, _full(0.0, dim + 1),
-                                                  q, ps, cell, cstart, cidx,
-                                                  ti.static((parent,)))
-                                for c in ti.static(range(dim)):
-                                    u[c] = acc[c]
-                                u -= acc[dim] * vi
-                            if ti.static(mission):
-                                u -= _row(mis, k, 1, dim)  # - grad V_i (eq. 3)
-                                damp = iprm[b, IP.DAMP]
-                                vm = mis[k, 0]
-                                if damp == 3 or (damp == 1 and vm > prm[b, P.VMIN]) or (
-                                        damp == 2 and vm <= prm[b, P.VMIN]):
-                                    u -= prm[b, P.CD] * vi
-                            v = vi + dt * u
-                            x = xi + dt * v
-                            put(pos, i, x)
-                            put(vel, i, v)
-                            bad |= _nonfinite(x, v)
-                        if bad != 0:
-                            iprm[b, IP.BAD] = s
-                    s += 1
+                replica(t // SPREAD, s0, s1, A)
 
     return advance
 
@@ -1074,7 +969,7 @@ class FlockingBatch(FusedBatch):
             val=arr(np.zeros(max(voff, 1), dtype=np.int32), i32),
             snap=scratch(max(int(self.snaps.base[-1]), 1)), sbase=arr(self.snaps.base, i32),
         )
-        self._order = list(self.args)
+        assert tuple(self.args) == ARRAYS
 
     CHECKPOINTS = True  # `args` and lambda_2's rows (`save_host`) are the whole state
 
@@ -1089,7 +984,7 @@ class FlockingBatch(FusedBatch):
         launches of at most `chunk` steps while lambda_2 snapshots are taken."""
         self.invalidate()
         for a, z in self.snaps.launches(s0, s1):
-            self.kernel(a, z, *(self.args[k] for k in self._order))
+            self.kernel(a, z, *(self.args[k] for k in ARRAYS))
             if self.snaps.chunk is not None:
                 self._lambda2()
 

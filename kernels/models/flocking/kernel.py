@@ -38,18 +38,9 @@ from ...space.plane_grid import PlaneGrid
 from ...space.state import SortedState, permute_all
 from ...space.stream import ArgMin, PairwiseSum, Rows, blocks
 from . import observe as fo
-from .forces import (
-    DIVERGED_CAUSE,
-    OWN,
-    UNIFORM,
-    P,
-    csr_accel,
-    csr_euler,
-    csr_potential,
-    grid_kernels,
-    grid_observe_kernel,
-)
+from .forces import P, csr_accel, csr_euler, csr_potential, grid_kernels, grid_observe_kernel
 from .fused import FlockingBatch
+from .law import DIVERGED_CAUSE, OWN, UNIFORM
 from .mission import Mission, NoMission
 from .radius import AgentRadii, UniformRadius
 from .topology import build_edges, to_csr

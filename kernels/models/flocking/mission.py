@@ -22,7 +22,8 @@ from flocklab.schemas.obstacles import ObstacleFlockingParams
 from ...runtime import DevicePolicy, as_real
 from ...space.state import SortedState
 from ...space.stream import PairwiseSum, Rows, blocks
-from .forces import DAMPING, NO_DAMPING, P
+from .forces import P
+from .law import DAMPING, NO_DAMPING
 from .navigation import NAV, ObstacleGrid, nav_eval_kernel, nav_parameters
 
 if TYPE_CHECKING:

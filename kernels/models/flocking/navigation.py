@@ -28,6 +28,7 @@ import taichi as ti
 from ...runtime import DevicePolicy, as_real
 from ...space.grid import Grid, make_visitor, row
 from ...space.params import Slots
+from . import law
 
 nd = ti.types.ndarray()
 # The navigation parameter array: the obstacle range and its lambda, kappa, the destination
@@ -83,33 +84,10 @@ class ObstacleGrid:
 
 
 @ti.func
-def fold_obstacle(acc, d, rho, rng, lam):
-    """Fold the obstacle at d = r_o - x (boundary radius rho; 0: a point) into
-    acc = (B, grad B, min delta) by the product rule (p. 3: beta_o = 1 - lambda e^2 /
-    (e^2 + 1), e = delta_o - d_o, where delta_o^2 < d_o^2). The per-step and the fused
-    path's fold."""
-    D = ti.static(d.n)
-    dist = ti.sqrt(d.dot(d))
-    delta = dist - rho
-    acc[D + 1] = ti.min(acc[D + 1], delta)
-    if delta * delta < rng * rng:  # m = 1; otherwise m = 0 and beta = 1
-        e = delta - rng
-        q = e * e + 1.0
-        beta = 1.0 - lam * e * e / q
-        dbeta = -2.0 * lam * e / (q * q)  # d beta / d delta
-        g = (-dbeta / dist) * d  # grad_x beta = dbeta (x - r_o) / |x - r_o|
-        b = acc[0]
-        for c in ti.static(range(D)):
-            acc[1 + c] = acc[1 + c] * beta + b * g[c]
-        acc[0] = b * beta
-    return acc
-
-
-@ti.func
 def _obstacle_pair(i, k, d, acc, S: ti.template()):
     """Fold obstacle k (d = r_o - x) into acc = (B, grad B, min delta)."""
     orad, nav = ti.static(S[0], S[1])
-    return fold_obstacle(acc, d, orad[k], nav[NAV.RANGE], nav[NAV.LAMBDA])
+    return law.fold_obstacle(acc, d, orad[k], nav[NAV.RANGE], nav[NAV.LAMBDA])
 
 
 _visit_obstacles = {dim: make_visitor(_obstacle_pair, dim=dim) for dim in (2, 3)}
@@ -141,20 +119,7 @@ def make_navigation(has_obstacles: bool, unit_kappa: bool, dim: int = 2):
         for c in ti.static(range(dim)):
             gb[c] = acc[1 + c]
             y[c] = xi[c] - nav[DEST[c]]
-        a = y.dot(y)
-        v = 0.0
-        g = ti.Vector.zero(float, dim)
-        if ti.static(unit_kappa):
-            dd = a + b
-            v = a / dd
-            g = (2.0 * b * y - a * gb) / (dd * dd)
-        else:
-            kappa = nav[NAV.KAPPA]
-            dd = ti.pow(a, kappa) + b
-            dk = ti.pow(dd, -1.0 / kappa)
-            v = a * dk
-            gd = 2.0 * kappa * ti.pow(a, kappa - 1.0) * y + gb
-            g = dk * 2.0 * y - (a / kappa) * (dk / dd) * gd
+        v, g = law.navigation_value(y, b, gb, nav[NAV.KAPPA], unit_kappa)
         out = ti.Vector.zero(float, dim + 2)
         out[0] = v
         for c in ti.static(range(dim)):

@@ -22,7 +22,8 @@ from flocklab.schemas.obstacles import ObstacleFlockingParams
 
 from ...runtime import wide
 from ...space.stream import PairwiseSum, Rows, blocks
-from .forces import RADIUS_RULES, UNIFORM, P, radius_kernel
+from .forces import P, radius_kernel
+from .law import RADIUS_RULES, UNIFORM
 
 if TYPE_CHECKING:
     from .parts import FlockView

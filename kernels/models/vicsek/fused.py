@@ -34,15 +34,16 @@ from flocklab.schemas import PeriodicBox, Scenario, VicsekParams
 from ... import runtime
 from ...replicas import FusedBatch, host_array
 from ...space import rng
-from ...space.cells import SPREAD, clear_cells, make_cell_sort
+from ...space.cells import SPREAD
 from ...space.graph import find, link, union_serial
-from ...space.grid import max_cells_across, widen
+from ...space.grid import widen
+from ...space.observables import make_circular_spread
 from ...space.params import Slots
+from ...space.replica_cells import G_NX, G_NY, G_NZ, G_O, G_W, make_replica_cells
 from .law import RULES, agent_step
 
 nd = ti.types.ndarray()
 ALL_PAIRS_N = 48  # at or below this N every pair is tested (fewer operations than cells)
-TWO_PI = 2 * np.pi
 
 # Per-replica parameter slots: prm (f64) and iprm (i32).
 P = Slots("R2", "V0DT", "ETA", "G", "L", "THETA0", "RADIUS", "CAP")
@@ -133,93 +134,8 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
         pos, ew, theta, ps, parent = ti.static(S[0], S[1], S[2], S[3], S[4])
         load(k, i, pos, ew, theta, ps, parent)
 
-    cell_sort, in_id_order = make_cell_sort(place)
-
-    @ti.func
-    def cells_for(ext, w):
-        """Cells of side w over a bounding box of extent ext (a float: no overflow)."""
-        cells = (ext[0] / w + 1.0) * (ext[1] / w + 1.0)
-        if ti.static(dim == 3):
-            cells *= ext[2] / w + 1.0
-        return cells
-
-    @ti.func
-    def build_cells(a0, n, c0, cap, Lb, r, pos: ti.template(), ew: ti.template(),
-                    theta: ti.template(), ps: ti.template(), cell: ti.template(),
-                    cstart: ti.template(), cidx: ti.template(), parent: ti.template()):
-        """Cell list of the replica's agents: cidx[a0 + k] is the agent in slot k, slots in
-        cell order and, within a cell, in id order (a stable counting sort), and cell c
-        holds slots cstart[c0 + c] .. cstart[c0 + c + 1]; X(s) is copied into ps in slot
-        order on the way (the visit reads only ps). Returns the grid (nx, ny, nz, w, o): the
-        cells across (nz = 1 in 2D; nx = 0: no grid, visit all pairs), their side and the
-        grid's origin, as floats (`reach` places each agent in its cell)."""
-        nx = 0
-        ny = 0
-        nz = 1
-        w = r * ti.static(widen())
-        o = vec(0.0)
-        if ti.static(periodic):
-            if n > ALL_PAIRS_N:
-                per_axis = ti.cast(ti.sqrt(cap), ti.i32)
-                if ti.static(dim == 3):  # the integer cube root of the cell budget
-                    per_axis = ti.cast(ti.pow(ti.cast(cap, float), 1.0 / 3.0), ti.i32)
-                    while (per_axis + 1) ** 3 <= cap:
-                        per_axis += 1
-                    while per_axis**3 > cap:
-                        per_axis -= 1
-                nc = ti.min(ti.cast(ti.floor(Lb / w), ti.i32), per_axis)
-                if nc >= 3:  # fewer: the 3x3 block would meet a cell twice
-                    nx = nc
-                    ny = nc
-                    if ti.static(dim == 3):
-                        nz = nc
-                    w = Lb / nc
-        else:
-            lo = vec(ti.math.inf)
-            hi = vec(-ti.math.inf)
-            for i in range(a0, a0 + n):
-                p = vec(0.0)
-                for c in ti.static(range(dim)):
-                    p[c] = pos[i, c]
-                lo = ti.min(lo, p)
-                hi = ti.max(hi, p)
-            ext = hi - lo
-            widest = ti.max(ext[0], ext[1])
-            if ti.static(dim == 3):
-                widest = ti.max(widest, ext[2])
-            if not (widest < ti.static(max_cells_across(dim)) * w):  # NaN included
-                nx = -1  # runaway (checked at every N): the caller stops the replica
-            elif n > ALL_PAIRS_N:
-                # Widen the cells until the grid fits the replica's cell budget (a swarm
-                # spread over 10^6 radii then shares a few large cells: slower, never wrong).
-                while cells_for(ext, w) > cap:
-                    w *= 2.0
-                nx = ti.cast(ti.floor(ext[0] / w), ti.i32) + 1
-                ny = ti.cast(ti.floor(ext[1] / w), ti.i32) + 1
-                if ti.static(dim == 3):
-                    nz = ti.cast(ti.floor(ext[2] / w), ti.i32) + 1
-                for c in ti.static(range(dim)):
-                    o[c] = lo[c]
-                if nx < 3 and ny < 3 and nz < 3:
-                    nx = 0
-        S = ti.static((pos, ew, theta, ps, parent))
-        if nx > 0:
-            clear_cells(c0, nx * ny * nz, cstart)
-            inv = 1.0 / w
-            for i in range(a0, a0 + n):
-                cx = ti.min(ti.cast(ti.floor((pos[i, 0] - o[0]) * inv), ti.i32), nx - 1)
-                cy = ti.min(ti.cast(ti.floor((pos[i, 1] - o[1]) * inv), ti.i32), ny - 1)
-                cc = ti.max(cx, 0) + nx * ti.max(cy, 0)
-                if ti.static(dim == 3):
-                    cz = ti.min(ti.cast(ti.floor((pos[i, 2] - o[2]) * inv), ti.i32), nz - 1)
-                    cc += nx * ny * ti.max(cz, 0)
-                cell[i] = cc
-                cstart[c0 + cc + 1] = cstart[c0 + cc + 1] + 1
-            cell_sort(a0, n, c0, nx * ny * nz, cell, cstart, cidx, S)
-        elif nx == 0:
-            in_id_order(a0, n, cidx, S)
-        return ti.Vector([ti.cast(nx, float), ti.cast(ny, float), ti.cast(nz, float), w]
-                         + [o[c] for c in ti.static(range(dim))])
+    build_cells = make_replica_cells(dim, periodic, min_n=ALL_PAIRS_N, reciprocal=True,
+                                     place=place)
 
     @ti.func
     def reach(k, cc, grid, far, ps: ti.template()):
@@ -230,9 +146,9 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
         sweeps' densities (cells 1.11-1.25 r wide)."""
         lo = ti.math.ivec3(0)
         hi = ti.math.ivec3(0)
-        w = grid[3]
+        w = grid[G_W]
         for c in ti.static(range(dim)):
-            u = ps[k * W + c] - grid[4 + c] - cc[c] * w  # offset in its cell (NaN: keep all)
+            u = ps[k * W + c] - grid[G_O + c] - cc[c] * w  # offset in its cell (NaN: keep all)
             lo[c] = ti.select(u > far, 0, -1)
             hi[c] = ti.select(w - u > far, 0, 1)
         return lo, hi
@@ -380,34 +296,13 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
         return res
 
     @ti.func
-    def circular_spread(a0, n, ps: ti.template(), lo: ti.template(), hi: ti.template()):
-        """2 pi minus the largest gap between headings on the circle, with n buckets (the
-        largest gap is between buckets, by pigeonhole): exact, O(n)."""
-        res = 0.0
-        if n >= 2:
-            for k in range(a0, a0 + n):
-                lo[k] = ti.math.inf
-                hi[k] = -ti.math.inf
-            for i in range(a0, a0 + n):
-                th = ti.atan2(ps[i * W + 3], ps[i * W + 2])
-                a = th - TWO_PI * ti.floor(th / TWO_PI)
-                if a >= TWO_PI:
-                    a -= TWO_PI
-                k = a0 + ti.min(ti.cast(a / TWO_PI * n, ti.i32), n - 1)
-                lo[k] = ti.min(lo[k], a)
-                hi[k] = ti.max(hi[k], a)
-            first = ti.math.inf
-            last = -ti.math.inf
-            gap = 0.0
-            for k in range(a0, a0 + n):
-                if lo[k] <= hi[k]:
-                    if last > -ti.math.inf:
-                        gap = ti.max(gap, lo[k] - last)
-                    else:
-                        first = lo[k]
-                    last = hi[k]
-            res = TWO_PI - ti.max(gap, first + TWO_PI - last)
-        return res
+    def heading_angle(k, S: ti.template()):
+        """theta of slot k from its unit vector (the vicsek rule, 2D)."""
+        ps = ti.static(S[0])
+        return ti.atan2(ps[k * W + 3], ps[k * W + 2])
+
+    # 2 pi minus the largest gap between the headings (kernels/space/observables.py).
+    circular_spread = make_circular_spread(heading_angle)
 
     @ti.func
     def observe(b, a0, n, s, row, ps: ti.template(), parent: ti.template(),
@@ -430,7 +325,7 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
             elif ti.static(dim == 3):
                 spread = sphere_spread(a0, n, sm, ps)
             elif ti.static(vicsek):
-                spread = circular_spread(a0, n, ps, arc_lo, arc_hi)
+                spread = circular_spread(a0, n, arc_lo, arc_hi, ti.static((ps,)))
             else:
                 lo = ti.math.inf
                 hi = -ti.math.inf
@@ -516,19 +411,20 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
         n = aoff[b + 1] - a0
         c0 = coff[b]
         live = 0
-        grid = ti.Vector.zero(float, 4 + dim)
+        grid = ti.Vector.zero(float, G_O + dim)
         far = 0.0
         if s <= iprm[b, IP.STEPS] and iprm[b, IP.BAD] < 0:
             radius = prm[b, P.RADIUS]
-            grid = build_cells(a0, n, c0, coff[b + 1] - c0 - 1, prm[b, P.L], radius,
-                               A[POS], A[EW], A[THETA], A[PS], A[CELL], A[CSTART], A[CIDX],
-                               A[PARENT])
+            grid = build_cells(a0, n, c0, coff[b + 1] - c0 - 1, radius * ti.static(widen()),
+                               prm[b, P.L], A[POS], A[CELL], A[CSTART], A[CIDX],
+                               ti.static((A[POS], A[EW], A[THETA], A[PS], A[PARENT])))
             # Farther than this from a cell's side, no agent across it is within r,
             # whatever the rounding of cells and distances (float32 included).
-            far = radius * 1.001 + 1e-5 * grid[3] * ti.max(grid[0], grid[1], grid[2])
+            far = radius * 1.001 + 1e-5 * grid[G_W] * ti.max(grid[G_NX], grid[G_NY],
+                                                              grid[G_NZ])
             for c in ti.static(range(dim)):
-                far += 1e-5 * ti.abs(grid[4 + c])
-            if grid[0] < 0.0:
+                far += 1e-5 * ti.abs(grid[G_O + c])
+            if grid[G_NX] < 0.0:
                 iprm[b, IP.BAD] = s
                 iprm[b, IP.CAUSE] = 1
             else:
@@ -667,13 +563,13 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
                 live, grid, far = begin(b, s, A)
                 flags[b, 0] = live
                 flags[b, 1] = 0
-                for c in ti.static(range(4 + dim)):
+                for c in ti.static(range(G_O + dim)):
                     grids[b, c] = grid[c]
-                grids[b, 4 + dim] = far
+                grids[b, G_O + dim] = far
         for k in range(ps.shape[0] // W):
             b = rep[k]
             if flags[b, 0] != 0:
-                grid = ti.Vector([grids[b, c] for c in ti.static(range(4 + dim))])
+                grid = ti.Vector([grids[b, c] for c in ti.static(range(G_O + dim))])
                 nx = ti.cast(grid[0], ti.i32)
                 ny = ti.cast(grid[1], ti.i32)
                 cc = ti.math.ivec3(0)
@@ -683,7 +579,7 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
                     cc[1] = (q // nx) % ny
                     if ti.static(dim == 3):
                         cc[2] = q // (nx * ny)
-                if slot(b, s, k, cc, grid, grids[b, 4 + dim], ATOMIC, A) != 0:
+                if slot(b, s, k, cc, grid, grids[b, G_O + dim], ATOMIC, A) != 0:
                     flags[b, 1] = 1
         for t in range(B * SPREAD):
             if t % SPREAD == 0:
@@ -876,7 +772,7 @@ class VicsekBatched(VicsekBatch):
             self.args = {k: _device(v) for k, v in self.args.items()}
         self.rep = on(np.repeat(np.arange(B), np.diff(self.aoff)), np.int32)  # slot -> b
         self.flags = on(np.zeros((B, 2)), np.int32)  # live, bad (this step)
-        self.grids = on(np.zeros((B, 5 + self.dim)), runtime.real())  # grid, far
+        self.grids = on(np.zeros((B, G_O + 1 + self.dim)), runtime.real())  # grid, far
 
     def advance(self, s0: int, s1: int) -> None:
         """Every replica from step s0 towards s1, a launch a step."""

@@ -23,13 +23,13 @@ from ...space import rng
 from ...space.graph import MetricGraph, count_roots, reset_parent
 from ...space.grid import Grid, row
 from ...space.initial import initial_state
+from ...space.observables import TWO_PI, arc_bucket, on_circle
 from ...space.state import SortedState
 from .fused import VicsekBatch, VicsekBatched
 from .law import RULES
 from .step import P, block_step_kernel, step_kernel
 
 nd = ti.types.ndarray()
-_TWO_PI = 2 * np.pi
 LINKED = ("count", "longest", "open_since")  # Theorem 2's counters
 
 
@@ -42,11 +42,8 @@ def _arc_buckets(ew: nd, lo: nd, hi: nd, nb: ti.i32):
         hi[b] = -ti.math.inf
     for i in range(ew.shape[0]):
         e = row(ew, i, 2)
-        th = ti.atan2(e[1], e[0])
-        a = th - _TWO_PI * ti.floor(th / _TWO_PI)
-        if a >= _TWO_PI:
-            a -= _TWO_PI
-        b = ti.min(ti.cast(a / _TWO_PI * nb, ti.i32), nb - 1)
+        a = on_circle(ti.atan2(e[1], e[0]))
+        b = arc_bucket(a, nb)
         ti.atomic_min(lo[b], a)
         ti.atomic_max(hi[b], a)
 
@@ -67,7 +64,7 @@ def _largest_gap(lo: nd, hi: nd, nb: ti.i32) -> float:
             else:
                 first = lo[b]
             last = hi[b]
-    return ti.max(gap, first + _TWO_PI - last)
+    return ti.max(gap, first + TWO_PI - last)
 
 
 @register_kernel
