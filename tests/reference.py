@@ -144,3 +144,35 @@ def formation_step(x, t, dt, targets_at, *, f, g, d, integrator="euler"):
     k3 = rates(x + 0.5 * dt * k2, t + 0.5 * dt)
     k4 = rates(x + dt * k3, t + dt)
     return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def knn_lists(pos: np.ndarray, k: int, L: float | None, radius: float | None = None,
+              inclusive: bool = True) -> list[list[int]]:
+    """Each agent's k nearest other agents, nearest first, by sorting all N - 1 distances
+    (minimum image in a periodic box): equal distances in agent-id order; with a radius,
+    only those within it (|r_ij| <= r, or < r)."""
+    n = len(pos)
+    d = displacements(pos, L)
+    d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
+    if pos.shape[1] == 3:
+        d2 = d2 + d[..., 2] * d[..., 2]
+    out = []
+    for i in range(n):
+        order = np.lexsort((np.arange(n), d2[i]))
+        order = order[order != i]
+        if radius is not None:
+            near = d2[i, order] <= radius * radius if inclusive else (
+                d2[i, order] < radius * radius)
+            order = order[near]
+        out.append([int(j) for j in order[:k]])
+    return out
+
+
+def knn_adjacency(pos: np.ndarray, k: int, L: float | None, radius: float | None = None,
+                  inclusive: bool = True, symmetric: bool = False) -> np.ndarray:
+    """Boolean A[i, j]: j is among i's k nearest (`knn_lists`); symmetric: or i among j's."""
+    n = len(pos)
+    a = np.zeros((n, n), dtype=bool)
+    for i, js in enumerate(knn_lists(pos, k, L, radius, inclusive)):
+        a[i, js] = True
+    return a | a.T if symmetric else a
