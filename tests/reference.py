@@ -29,9 +29,10 @@ def adjacency(pos: np.ndarray, r: float, L: float | None, inclusive: bool) -> np
 
 
 def vicsek_step(pos, theta, *, rule, r, L, inclusive, v0dt, eta=0.0, g=None, theta0=0.0,
-                noise=None, move_new=False):
-    """One synchronous M1 step for every rule (the equations: kernels/models/vicsek/step.py)."""
-    a = adjacency(pos, r, L, inclusive)
+                noise=None, move_new=False, graph=None):
+    """One synchronous M1 step for every rule (the equations: kernels/models/vicsek/step.py).
+    graph: the adjacency A[i, j] to use (e.g. `knn_adjacency`); default the metric one."""
+    a = adjacency(pos, r, L, inclusive) if graph is None else graph
     closed = a | np.eye(len(pos), dtype=bool)
     cnt = closed.sum(axis=1)
     if rule == "vicsek":
@@ -70,10 +71,10 @@ def cap_turn(m: np.ndarray, u1: np.ndarray, u2: np.ndarray, eta: float) -> np.nd
 
 
 def vicsek_step_3d(pos, e, *, r, L, inclusive, v0dt, eta=0.0, u1=None, u2=None,
-                   move_new=False):
+                   move_new=False, graph=None):
     """One synchronous 3D Vicsek step: e_i' = the closed neighbourhood's mean direction,
     turned into the spherical cap of half-angle eta/2 (uniforms u1, u2 per agent)."""
-    a = adjacency(pos, r, L, inclusive)
+    a = adjacency(pos, r, L, inclusive) if graph is None else graph
     closed = a | np.eye(len(pos), dtype=bool)
     s = closed.astype(np.float64) @ e
     norm = np.linalg.norm(s, axis=1)
