@@ -84,6 +84,8 @@ def _uncovered(scenario: Scenario, backend: str, path: str) -> str | None:
             scenario.time.steps >= FUSED_MAX_STEPS_FLOAT32):
         return (f"float32 runs of {FUSED_MAX_STEPS_FLOAT32} steps or more take the per-step "
                 "schedule (the step numbers of its observations would round)")
+    if scenario.neighbours is not None and scenario.neighbours.topological:
+        return "topological neighbours run on the per-step schedule only"
     if scenario.dimension not in cls.dimensions:
         return f"it runs space.dimension {' or '.join(map(str, cls.dimensions))} only"
     if scenario.recording.enabled and scenario.recording.derived:

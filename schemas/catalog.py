@@ -34,6 +34,8 @@ class ModelContext:
     space: Literal["periodic", "plane"]
     radius: float | None  # neighbours.radius; None without a neighbours block
     dt: float
+    # neighbours.kind ("metric" or "topological"); None without a neighbours block
+    neighbours: str | None = None
 
 
 class ModelParams(Strict):
@@ -44,6 +46,11 @@ class ModelParams(Strict):
     summary: ClassVar[str] = ""
     # Whether the paper's neighbourhood test is |r_ij| <= r (True) or < r (False).
     paper_inclusive: ClassVar[bool] = True
+    # The neighbours.kind values the model runs with (schemas/common.py `Neighbours`):
+    # "metric" |r_ij| < r; "topological" the k nearest (Ballerini et al. 2008).
+    neighbour_kinds: ClassVar[tuple[str, ...]] = ("metric",)
+    # A line for `flocklab models` on the kinds (what topological means for the model).
+    neighbours_note: ClassVar[str] = ""
     # Per-agent state the model has, a subset of ("position", "velocity", "heading").
     state_arrays: ClassVar[tuple[str, ...]] = ("position",)
     # Per-agent arrays derived from the state that the model can record, a subset of
@@ -160,6 +167,8 @@ def describe_models() -> list[dict[str, Any]]:
                 "paper": cls.paper,
                 "equations": cls.equations,
                 "paper_inclusive": cls.paper_inclusive,
+                "neighbour_kinds": list(cls.neighbour_kinds),
+                "neighbours_note": cls.neighbours_note,
                 "state": list(cls.state_arrays),
                 "derived_arrays": list(cls.derived_arrays),
                 "observables": None if cls.observables is None else list(cls.observables),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, ClassVar, Literal
 
-from pydantic import Field, StrictBool, ValidationInfo, field_validator, model_validator
+from pydantic import Field, StrictBool, StrictInt, ValidationInfo, field_validator, model_validator
 
 from .base import (
     MAX_ABS_COORD,
@@ -27,6 +27,8 @@ MAX_STEPS = 10**9
 # 2: the plane and the square box (the papers' setting); 3: space and the cube.
 Dimension = Literal[2, 3]
 DIMENSION_DOC = "Spatial dimension: 2 (default) or 3."
+# Topological neighbourhoods hold k neighbour slots an agent: k at most this.
+MAX_TOPOLOGICAL_K = 1024
 
 
 class PeriodicBox(Strict):
@@ -50,14 +52,55 @@ Space = Annotated[PeriodicBox | Plane, Field(discriminator="kind")]
 
 
 class Neighbours(Strict):
-    """Metric neighbourhood |r_ij| < radius (or <= radius)."""
+    """Who interacts with whom. kind "metric" (the default): N_i = {j : |r_ij| < radius} (or
+    <= radius). kind "topological" (Ballerini et al., PNAS 105, 1232, 2008): N_i = the k
+    nearest other agents (minimum image in the periodic box; equal distances ordered by
+    agent id), only those within `radius` when it is given; `symmetric` makes the graph
+    undirected (i ~ j when either is among the other's k)."""
 
-    radius: PositiveReal = Field(description="Interaction radius (r, R or d in the papers).")
+    kind: Literal["metric", "topological"] = Field(
+        default="metric",
+        description="metric: every agent within the radius; topological: the k nearest "
+        "(metric-free, Ballerini et al. 2008), for the models whose card lists it.",
+    )
+    radius: PositiveReal | None = Field(
+        default=None,
+        description="Interaction radius (r, R or d in the papers); required for kind "
+        "metric. Topological: an optional cap, only agents within it count.",
+    )
     inclusive: StrictBool | None = Field(
         default=None,
         description="True: |r_ij| <= radius ('in or on' the circle); False: strict <. "
         "null: the paper's own choice for the model.",
     )
+    k: StrictInt | None = Field(
+        default=None, ge=1, le=MAX_TOPOLOGICAL_K,
+        description="Topological: the number of nearest other agents each agent follows "
+        "(Ballerini et al.: 6-7); with N <= k every other agent is a neighbour.",
+    )
+    symmetric: StrictBool = Field(
+        default=False,
+        description="Topological: True makes the graph undirected (i ~ j when either is "
+        "among the other's k nearest); False: i follows its own k nearest (directed).",
+    )
+
+    @model_validator(mode="after")
+    def _kind_fields(self) -> Neighbours:
+        if self.kind == "metric":
+            if self.radius is None:
+                raise ValueError("neighbours.radius is required for kind 'metric' (or set "
+                                 "neighbours.kind 'topological' with k)")
+            if self.k is not None or self.symmetric:
+                raise ValueError("neighbours.k and neighbours.symmetric apply to kind "
+                                 "'topological' only")
+        elif self.k is None:
+            raise ValueError("neighbours.k is required for kind 'topological' (the number "
+                             "of nearest neighbours, e.g. 7)")
+        return self
+
+    @property
+    def topological(self) -> bool:
+        return self.kind == "topological"
 
 
 class Box(Strict):

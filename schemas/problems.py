@@ -33,7 +33,7 @@ class Problem(BaseModel):
 
 
 # Fields whose cross-block checks (Scenario's model validator) start "<field>: message".
-CROSS_CHECKED = ("model", "space.dimension", "recording.arrays")
+CROSS_CHECKED = ("model", "space.dimension", "recording.arrays", "neighbours.kind")
 
 
 def field_errors(exc: ValidationError, prefix: tuple[str | int, ...] = ()) -> list[FieldError]:

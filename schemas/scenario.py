@@ -7,7 +7,7 @@ import math
 from pydantic import Field, StrictInt, model_validator
 
 from .base import Strict
-from .catalog import ModelContext
+from .catalog import MODELS, ModelContext
 from .common import (
     Backend,
     Convergence,
@@ -36,7 +36,9 @@ class Scenario(Strict):
     model: ModelSpec = Field(description="Model family and its parameters (by `kind`).")
     space: Space = Field(default=PeriodicBox(L=10.0), description="Periodic box or plane.")
     neighbours: Neighbours | None = Field(
-        default=None, description="Metric neighbourhood; required by metric models."
+        default=None,
+        description="The neighbourhood: metric (a radius, the default kind) or topological "
+        "(the k nearest); required by models with neighbours."
     )
     initial: Initial = Field(description="Initial state (random with the seed, or explicit).")
     time: TimeSpec = Field(description="Steps and step length.")
@@ -116,6 +118,17 @@ class Scenario(Strict):
             f"{', '.join(missing)} ({'; '.join(why[a] for a in missing)}); it records "
             f"{', '.join(has)}")
 
+    def _check_neighbour_kind(self) -> None:
+        """neighbours.kind is one the model runs with (topological: the Vicsek family)."""
+        nb = self.neighbours
+        kinds = type(self.model).neighbour_kinds
+        if nb is not None and nb.kind not in kinds:
+            with_it = [k for k, m in MODELS.items() if nb.kind in m.neighbour_kinds]
+            raise ValueError(
+                f"neighbours.kind: model {self.model.kind} takes {' or '.join(kinds)} "
+                f"neighbours only, not {nb.kind!r} (models with {nb.kind} neighbours: "
+                f"{', '.join(with_it) or 'none'})")
+
     @model_validator(mode="after")
     def _cross_checks(self) -> Scenario:
         n = self.n_agents
@@ -164,10 +177,12 @@ class Scenario(Strict):
             raise ValueError(
                 f"space.dimension: model {self.model.kind} runs in dimension "
                 f"{' or '.join(map(str, dims))}, not {self.dimension}")
+        self._check_neighbour_kind()
+        nb = self.neighbours
         ctx = ModelContext(
             n_agents=self.n_agents, dimension=self.dimension, space=self.space.kind,
-            radius=None if self.neighbours is None else self.neighbours.radius,
-            dt=self.time.dt)
+            radius=None if nb is None else nb.radius, dt=self.time.dt,
+            neighbours=None if nb is None else nb.kind)
         try:
             self.model.check_context(ctx)
         except ValueError as exc:

@@ -1,7 +1,8 @@
 """M1: Vicsek and the Jadbabaie–Lin–Morse heading rules (paper 001).
 
 Agents move at a common speed v0 with heading theta_i; x_i(t+1) = x_i(t) + v0 dt e(theta_i).
-Heading rules over the closed neighbourhood N_i ∪ {i}, N_i = {j : |r_ij| <= r}:
+Heading rules over the closed neighbourhood N_i ∪ {i}, N_i = {j : |r_ij| <= r} (metric) or
+the k nearest other agents (topological, Ballerini et al. 2008):
   vicsek    theta_i <- arg sum_j e^{i theta_j} + xi_i               (Vicsek et al. 1995)
   average   theta_i <- (theta_i + sum_{N_i} theta_j) / (1 + n_i)    (eq. 1-2)
   laplacian theta   <- theta - (1/g) L theta,  g > N                (eq. 17-18)
@@ -49,6 +50,10 @@ class VicsekParams(ModelParams):
     details: ClassVar[str] = "docs/models/vicsek.md"
     overlays: ClassVar[tuple[Overlay, ...]] = ("edges", "marked")
     constant_speed: ClassVar[str | None] = "v0"
+    neighbour_kinds: ClassVar[tuple[str, ...]] = ("metric", "topological")
+    neighbours_note: ClassVar[str] = (
+        "every rule sums over {i} and its k nearest (Ballerini et al. 2008; Ginelli & Chate "
+        "2010), per-step schedule only; degree is k for every agent (asymmetric graph)")
 
     kind: Literal["vicsek"] = "vicsek"
     rule: Rule = Field(default="vicsek", description="Heading update rule.")
@@ -102,8 +107,9 @@ class VicsekParams(ModelParams):
         return self.rule in ("average", "laplacian", "leader") and n_agents <= 100_000
 
     def check_context(self, ctx: ModelContext) -> None:
-        if ctx.radius is None:
-            raise ValueError("model vicsek needs a neighbours block with the radius r")
+        if ctx.neighbours is None:
+            raise ValueError("model vicsek needs a neighbours block: the radius r (metric) "
+                             "or k (topological)")
         n = ctx.n_agents
         if self.noise == "vectorial" and self.rule != "vicsek":
             raise ValueError(

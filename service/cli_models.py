@@ -20,6 +20,13 @@ def print_model(m: dict[str, Any]) -> None:
     print(f"  equations: {m['equations']}")
     print(f"  neighbourhood: |r_ij| {'<=' if m['paper_inclusive'] else '<'} radius "
           f"(paper's choice); state: {', '.join(m['state'])}")
+    kinds = m.get("neighbour_kinds", ["metric"])
+    if "topological" in kinds:
+        print(f"  neighbours.kind: {', '.join(kinds)} (topological: the k nearest)"
+              + (f"; {m['neighbours_note']}" if m.get("neighbours_note") else ""))
+    else:
+        print("  neighbours.kind: metric only (topological is refused: not yet for this "
+              "model)")
     if m.get("derived_arrays"):
         print(f"  also recordable per agent: {', '.join(m['derived_arrays'])}")
     if m.get("observables"):

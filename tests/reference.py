@@ -29,9 +29,10 @@ def adjacency(pos: np.ndarray, r: float, L: float | None, inclusive: bool) -> np
 
 
 def vicsek_step(pos, theta, *, rule, r, L, inclusive, v0dt, eta=0.0, g=None, theta0=0.0,
-                noise=None, move_new=False):
-    """One synchronous M1 step for every rule (the equations: kernels/models/vicsek/step.py)."""
-    a = adjacency(pos, r, L, inclusive)
+                noise=None, move_new=False, graph=None):
+    """One synchronous M1 step for every rule (the equations: kernels/models/vicsek/step.py).
+    graph: the adjacency A[i, j] to use (e.g. `knn_adjacency`); default the metric one."""
+    a = adjacency(pos, r, L, inclusive) if graph is None else graph
     closed = a | np.eye(len(pos), dtype=bool)
     cnt = closed.sum(axis=1)
     if rule == "vicsek":
@@ -70,10 +71,10 @@ def cap_turn(m: np.ndarray, u1: np.ndarray, u2: np.ndarray, eta: float) -> np.nd
 
 
 def vicsek_step_3d(pos, e, *, r, L, inclusive, v0dt, eta=0.0, u1=None, u2=None,
-                   move_new=False):
+                   move_new=False, graph=None):
     """One synchronous 3D Vicsek step: e_i' = the closed neighbourhood's mean direction,
     turned into the spherical cap of half-angle eta/2 (uniforms u1, u2 per agent)."""
-    a = adjacency(pos, r, L, inclusive)
+    a = adjacency(pos, r, L, inclusive) if graph is None else graph
     closed = a | np.eye(len(pos), dtype=bool)
     s = closed.astype(np.float64) @ e
     norm = np.linalg.norm(s, axis=1)
@@ -146,12 +147,14 @@ def formation_step(x, t, dt, targets_at, *, f, g, d, integrator="euler"):
     return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
-def vicsek_step_vectorial(pos, e, *, r, L, inclusive, v0dt, eta, u1, u2, move_new=False):
+def vicsek_step_vectorial(pos, e, *, r, L, inclusive, v0dt, eta, u1, u2, move_new=False,
+                          graph=None):
     """One synchronous Vicsek step with vectorial noise (Grégoire & Chaté 2004), 2D or 3D:
     e_i' = w / |w|, w = sum over the closed neighbourhood of e_j + eta n_i u_i, u_i the
     random unit vector of the uniforms (u1, u2): 2D at angle 2 pi u1, 3D z = 2 u1 - 1 and
-    azimuth 2 pi u2. A zero w keeps the x axis."""
-    a = adjacency(pos, r, L, inclusive)
+    azimuth 2 pi u2. A zero w keeps the x axis. `graph`: a given adjacency (topological
+    neighbours) in place of the metric one."""
+    a = adjacency(pos, r, L, inclusive) if graph is None else graph
     closed = a | np.eye(len(pos), dtype=bool)
     n = closed.sum(axis=1).astype(np.float64)
     if pos.shape[1] == 2:
@@ -169,3 +172,35 @@ def vicsek_step_vectorial(pos, e, *, r, L, inclusive, v0dt, eta, u1, u2, move_ne
     if L is not None:
         x = np.mod(x, L)
     return x, new
+
+
+def knn_lists(pos: np.ndarray, k: int, L: float | None, radius: float | None = None,
+              inclusive: bool = True) -> list[list[int]]:
+    """Each agent's k nearest other agents, nearest first, by sorting all N - 1 distances
+    (minimum image in a periodic box): equal distances in agent-id order; with a radius,
+    only those within it (|r_ij| <= r, or < r)."""
+    n = len(pos)
+    d = displacements(pos, L)
+    d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
+    if pos.shape[1] == 3:
+        d2 = d2 + d[..., 2] * d[..., 2]
+    out = []
+    for i in range(n):
+        order = np.lexsort((np.arange(n), d2[i]))
+        order = order[order != i]
+        if radius is not None:
+            near = d2[i, order] <= radius * radius if inclusive else (
+                d2[i, order] < radius * radius)
+            order = order[near]
+        out.append([int(j) for j in order[:k]])
+    return out
+
+
+def knn_adjacency(pos: np.ndarray, k: int, L: float | None, radius: float | None = None,
+                  inclusive: bool = True, symmetric: bool = False) -> np.ndarray:
+    """Boolean A[i, j]: j is among i's k nearest (`knn_lists`); symmetric: or i among j's."""
+    n = len(pos)
+    a = np.zeros((n, n), dtype=bool)
+    for i, js in enumerate(knn_lists(pos, k, L, radius, inclusive)):
+        a[i, js] = True
+    return a | a.T if symmetric else a

@@ -23,11 +23,12 @@ from ...space import rng
 from ...space.graph import MetricGraph, count_roots, reset_parent
 from ...space.grid import Grid, row
 from ...space.initial import initial_state
+from ...space.knn import TopologicalNeighbours
 from ...space.observables import TWO_PI, arc_bucket, on_circle
 from ...space.state import SortedState
 from .fused import VicsekBatch, VicsekBatched
 from .law import RULES
-from .step import P, block_step_kernel, step_kernel
+from .step import P, block_step_kernel, step_kernel, topological_step_kernel
 
 nd = ti.types.ndarray()
 LINKED = ("count", "longest", "open_since")  # Theorem 2's counters
@@ -81,7 +82,8 @@ class VicsekKernel(ModelKernel):
         self.periodic = isinstance(scenario.space, PeriodicBox)
         self.dim = dim = scenario.dimension
         L = scenario.space.L if self.periodic else 0.0
-        radius = scenario.neighbours.radius
+        nb = scenario.neighbours
+        radius = nb.radius
         init = initial_state(scenario)
         theta = init.headings
         if p.rule == "leader":
@@ -98,11 +100,21 @@ class VicsekKernel(ModelKernel):
         self.state = SortedState(arrays, vectors=("pos", "ew"))
         self._swap = tuple(arrays)
         self._no_theta = ti.ndarray(float, shape=1)  # stands in for theta (vicsek rule)
-        self.grid = Grid(n, radius, L if self.periodic else None, policy, dim)
-        self.graph = MetricGraph(n, radius, scenario.inclusive, self.periodic, dim)
+        # Topological: the k nearest on a grid with cells sized for k (kernels/space/knn.py),
+        # searched each step; the metric graph then only holds the degrees and components.
+        self.knn = None
+        if nb.topological:
+            self.knn = TopologicalNeighbours(n, nb.k, radius, scenario.inclusive,
+                                             nb.symmetric, L if self.periodic else None,
+                                             policy, dim)
+            self.grid = self.knn.grid
+        else:
+            self.grid = Grid(n, radius, L if self.periodic else None, policy, dim)
+        self._knn_for = -1  # the step whose state the k-NN lists are of
+        self.graph = MetricGraph(n, radius or 0.0, scenario.inclusive, self.periodic, dim)
         self.prm = ti.ndarray(float, shape=P.size)
         self.prm.from_numpy(as_real(P.pack(
-            R2=radius * radius, V0DT=p.v0 * scenario.time.dt, ETA=p.eta, G=p.g or 1.0, L=L,
+            R2=(radius or 0.0) ** 2, V0DT=p.v0 * scenario.time.dt, ETA=p.eta, G=p.g or 1.0, L=L,
             THETA0=p.leader_heading, CAP=1.0 - np.cos(p.eta / 2),
         )))
         self.bad = ti.ndarray(ti.i32, shape=1)
@@ -112,12 +124,18 @@ class VicsekKernel(ModelKernel):
         variant = (RULES[p.rule], scenario.inclusive, self.periodic,
                    p.position_update == "new_heading")
         vectorial = p.noise == "vectorial"
-        self.kernel = step_kernel(*variant, False, dim, vectorial)
-        if p.rule == "vicsek" and self.grid.blocks and policy.cell_blocks:  # same bits
-            self.kernel = block_step_kernel(scenario.inclusive,
-                                            p.position_update == "new_heading", dim,
-                                            vectorial)
-        self.kernel_with_graph = step_kernel(*variant, True, dim, vectorial)
+        if self.knn is not None:
+            topo = (RULES[p.rule], self.periodic, p.position_update == "new_heading")
+            self.kernel = topological_step_kernel(*topo, False, dim, nb.symmetric, vectorial)
+            self.kernel_with_graph = topological_step_kernel(*topo, True, dim, nb.symmetric,
+                                                             vectorial)
+        else:
+            self.kernel = step_kernel(*variant, False, dim, vectorial)
+            if p.rule == "vicsek" and self.grid.blocks and policy.cell_blocks:  # same bits
+                self.kernel = block_step_kernel(scenario.inclusive,
+                                                p.position_update == "new_heading", dim,
+                                                vectorial)
+            self.kernel_with_graph = step_kernel(*variant, True, dim, vectorial)
         self.track = p.tracks_linked(n, scenario.recording.observables)
         if self.track:
             self.parent_u = ti.ndarray(ti.i32, shape=n)
@@ -139,11 +157,21 @@ class VicsekKernel(ModelKernel):
             self._theta(st.scratch_all()), st.scratch("ew"), self.prm,
             rng.step_key(self.scenario.seed, 0, step), rng.step_key(self.scenario.seed, 1, step),
             self.bad,
-            self.graph.parent, self.graph.deg, *self.grid.view(),
+            self.graph.parent, self.graph.deg, *self._neighbour_view(step),
         )
         self._advanced_for = step
         if with_graph:
             self._graph_for = step
+
+    def _neighbour_view(self, step: int) -> tuple:
+        """What the step kernel reads of the neighbourhoods: the grid (metric), or this
+        step's k-NN lists (topological, searched once per step)."""
+        if self.knn is None:
+            return self.grid.view()
+        if self._knn_for != step:
+            self.knn.search(self.state["pos"], self.state.ids)
+            self._knn_for = step
+        return self.knn.view()
 
     def step(self, step: int) -> None:
         self.state.sort(self.grid, step)
@@ -163,8 +191,12 @@ class VicsekKernel(ModelKernel):
     def _track_linked(self, step: int) -> None:
         """Theorem 2: contiguous intervals over which the union of the graphs is connected."""
         st = self.state
-        self.graph.union_edges(self.grid, st["pos"], st.ids, parent=self.parent_u)
-        self._graph_for = -1  # that pass wrote its own degrees over graph.deg
+        if self.knn is not None:  # the union of the k-NN graphs (weakly connected)
+            self._neighbour_view(step)
+            self.knn.union_edges(st.ids, self.parent_u, by_id=True)
+        else:
+            self.graph.union_edges(self.grid, st["pos"], st.ids, parent=self.parent_u)
+            self._graph_for = -1  # that pass wrote its own degrees over graph.deg
         if count_roots(self.parent_u) == 1:
             lk = self.linked
             lk["count"] += 1

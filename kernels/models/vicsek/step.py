@@ -167,3 +167,56 @@ def block_step_kernel(inclusive: bool, move_new: bool, dim: int, vectorial: bool
                       ti.Vector([key, key2], dt=ti.u32))
 
     return step
+
+
+@cache
+def topological_step_kernel(rule: int, periodic: bool, move_new: bool, with_graph: bool,
+                            dim: int, symmetric: bool, vectorial: bool):
+    """The step with topological neighbours (kernels/space/knn.py): S_i = the sums over
+    {i} and its k nearest (nearest first; with `symmetric`, then the agents that have i
+    among their k and are not among i's, by slot), the same law. The lists come from the
+    search run on this step's state; `with_graph` also writes each degree |N_i| and unions
+    every edge into `parent` (slot-indexed) for the components; `vectorial`: Grégoire–Chaté
+    noise (eta n_i u_i added to S)."""
+    counted = rule != RULES["vicsek"] or with_graph or vectorial
+    finish = _finisher(rule, periodic, move_new, dim, vectorial)
+
+    @ti.func
+    def term(k, ew: ti.template(), theta: ti.template()):
+        """Agent k's term of the sums: its unit vector (vicsek) or (theta_k, 0, 1)."""
+        if ti.static(rule == RULES["vicsek"]):
+            ek = row(ew, k, dim)
+            if ti.static(counted):
+                return ti.Vector([ek[c] for c in ti.static(range(dim))] + [1.0])
+            return ek
+        return ti.math.vec3(theta[k], 0.0, 1.0)
+
+    @ti.func
+    def join(parent: ti.template(), u, v):
+        ru = find(parent, u)
+        rv = find(parent, v)
+        if ru != rv:
+            link(parent, ru, rv)
+
+    @ti.kernel
+    def step(pos: nd, theta: nd, ew: nd, ids: nd, pos_out: nd, theta_out: nd, ew_out: nd,
+             prm: nd, key: ti.u32, key2: ti.u32, bad: nd, parent: nd, deg: nd,
+             nbr: nd, cnt: nd, in_start: nd, in_src: nd):
+        for i in range(pos.shape[0]):
+            acc = term(i, ew, theta)  # the closed neighbourhood holds i
+            n_i = cnt[i]
+            for t in range(n_i):
+                j = nbr[i, t]
+                acc += term(j, ew, theta)
+                if ti.static(with_graph):
+                    join(parent, i, j)
+            if ti.static(symmetric):
+                for q in range(in_start[i], in_start[i + 1]):
+                    acc += term(in_src[q], ew, theta)
+                n_i += in_start[i + 1] - in_start[i]
+            if ti.static(with_graph):
+                deg[i] = n_i
+            finish(i, row(pos, i, dim), acc, theta, ew, ids, pos_out, theta_out, ew_out,
+                   prm, key, key2, bad)
+
+    return step
