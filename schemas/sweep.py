@@ -26,6 +26,7 @@ import itertools
 import json
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
@@ -400,15 +401,16 @@ class Sweep(Strict):
         return [*self.axes, ZipAxis(zip=[AxisValues(path=p, values=[x[p] for x in points])
                                          for p in self.design.bounds])]
 
-    def _grid(self) -> list[dict[str, Any]]:
-        """path -> value for each grid point (the 'replicas' pseudo-path included)."""
+    def _grid(self) -> Iterator[dict[str, Any]]:
+        """path -> value for each grid point (the 'replicas' pseudo-path included), one
+        point at a time."""
         choices = []
         for a in self._all_axes:
             members = a.zip if isinstance(a, ZipAxis) else [a]
             length = len(members[0].values)
             choices.append([{m.path: m.values[i] for m in members} for i in range(length)])
-        return [dict(kv for part in combo for kv in part.items())
-                for combo in itertools.product(*choices)]
+        for combo in itertools.product(*choices):
+            yield dict(kv for part in combo for kv in part.items())
 
     @property
     def n_points(self) -> int:
@@ -458,6 +460,12 @@ class Sweep(Strict):
 
     @functools.cached_property
     def _expanded(self) -> list[SweepRun]:
+        return list(self.iter_runs())
+
+    def iter_runs(self) -> Iterator[SweepRun]:
+        """The runs of `expand`, one grid point at a time and none kept: what holds the
+        runs is the caller's (the service checks a 10^5-run sweep in bounded memory).
+        Validated as they come; the SweepError of `expand` comes after the last run."""
         base = self.base_scenario
         doc = base.model_dump(mode="json")
         errors = unknown_paths(doc, self.model_dump(mode="json")["axes"])
@@ -469,7 +477,6 @@ class Sweep(Strict):
                                          type="unknown_path"))
         if errors:
             raise SweepError(errors)
-        runs: list[SweepRun] = []
         bad_points = first = 0  # first: the index of the grid point's first run
         for p, values in enumerate(self._grid()):
             n_rep = values.pop(REPLICAS_PATH, self.replicas)
@@ -488,9 +495,8 @@ class Sweep(Strict):
                                                  f"{seed} (base seed + {k}) >= 2^63",
                                                  type="seed_range"))
                         break
-                    runs.append(SweepRun(first + k, p, k, seed, values,
-                                         self._only_kept(scenario).model_copy(
-                                             update={"seed": seed})))
+                    yield SweepRun(first + k, p, k, seed, values,
+                                   self._only_kept(scenario).model_copy(update={"seed": seed}))
             first += n_rep
         if bad_points > MAX_REPORTED:
             errors.append(FieldError(loc="runs", type="value_error",
@@ -498,7 +504,6 @@ class Sweep(Strict):
                                      "points not listed"))
         if errors:
             raise SweepError(errors)
-        return runs
 
     def _only_kept(self, scenario: Scenario) -> Scenario:
         """The run computes only what the sweep keeps: with keep 'table' (runs leave

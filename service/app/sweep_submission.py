@@ -63,7 +63,7 @@ def parse_sweep_submission(raw: bytes, settings: Settings) -> SweepSubmission:
         raise invalid([FieldError(loc="(body)", msg=str(exc), type="finite_number")]) from None
 
     try:
-        runs = check_sweep(sweep, settings.limits())
+        scan = check_sweep(sweep, settings.limits())
     except SweepError as exc:  # an unknown path, a run whose scenario is invalid
         raise invalid(exc.errors) from None
     except SweepLimitError as exc:
@@ -79,8 +79,8 @@ def parse_sweep_submission(raw: bytes, settings: Settings) -> SweepSubmission:
     canonical = sweep.model_dump_json()
     digest = hashlib.sha256(f"sweep\n{canonical}\n{timeout!r}".encode()).hexdigest()
     return SweepSubmission(
-        sweep=sweep, canonical=canonical, model_kind=runs[0].scenario.model.kind,
-        max_agents=max(r.scenario.n_agents for r in runs), runs_total=len(runs),
+        sweep=sweep, canonical=canonical, model_kind=scan.model_kind,
+        max_agents=scan.max_agents, runs_total=scan.runs,
         timeout_seconds=timeout, request_hash=digest)
 
 

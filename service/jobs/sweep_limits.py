@@ -5,6 +5,7 @@ storing it and the worker again before running it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from flocklab.schemas import FieldError
@@ -12,7 +13,7 @@ from flocklab.schemas import FieldError
 from .limits import Limits, check_limits
 
 if TYPE_CHECKING:
-    from flocklab.schemas.sweep import Sweep, SweepRun
+    from flocklab.schemas.sweep import Sweep
 
 # Enough per-run errors to see the pattern; a 10^5-run sweep would flood the answer.
 MAX_REPORTED = 20
@@ -27,13 +28,24 @@ class SweepLimitError(Exception):
         super().__init__("; ".join(f"{e.loc}: {e.msg}" for e in errors))
 
 
-def check_sweep(sweep: Sweep, limits: Limits) -> list[SweepRun]:
-    """The sweep's runs, once it is within every limit.
+@dataclass(frozen=True)
+class SweepScan:
+    """What admitting a sweep needs of its runs, gathered in one pass over them."""
+
+    runs: int
+    agent_steps: int  # N x steps summed over the runs
+    max_agents: int  # the largest N of a run
+    model_kind: str  # the first run's model
+
+
+def check_sweep(sweep: Sweep, limits: Limits) -> SweepScan:
+    """The sweep's scan, once it is within every limit.
 
     The run count is checked before the runs are expanded (expanding is the costly
-    part); then the total agent-steps (N x steps summed over runs) and each run against
-    the per-job limits, errors naming the run and the field. Raises SweepLimitError, or
-    `schemas.sweep.SweepError` when a run is invalid.
+    part); then, in one pass over the runs expanded lazily (`Sweep.iter_runs`: memory
+    does not grow with the sweep), the total agent-steps (N x steps summed over runs) and
+    each run against the per-job limits, errors naming the run and the field. Raises
+    SweepLimitError, or `schemas.sweep.SweepError` when a run is invalid (that first).
     """
     n_runs = sweep.n_runs
     numbers = {"runs": n_runs, "max_runs": limits.max_sweep_runs,
@@ -43,21 +55,25 @@ def check_sweep(sweep: Sweep, limits: Limits) -> list[SweepRun]:
             loc="axes", type="limit_exceeded",
             msg=f"the sweep has {n_runs} runs ({sweep.n_points} grid points x replicas), "
                 f"over this service's limit of {limits.max_sweep_runs}")], numbers)
-    runs = sweep.expand()
-    agent_steps = sum(r.scenario.n_agents * r.scenario.time.steps for r in runs)
+    agent_steps = max_agents = count = 0
+    kind = ""
+    errors: list[FieldError] = []
+    for run in sweep.iter_runs():
+        sc = run.scenario
+        count += 1
+        kind = kind or sc.model.kind
+        agent_steps += sc.n_agents * sc.time.steps
+        max_agents = max(max_agents, sc.n_agents)
+        if len(errors) < MAX_REPORTED:
+            errors += [FieldError(loc=f"runs[{run.index}].{e.loc}", type=e.type,
+                                  msg=f"{e.msg} (run {run.index})")
+                       for e in check_limits(sc, limits)]
     if agent_steps > limits.max_sweep_agent_steps:
         raise SweepLimitError([FieldError(
             loc="axes", type="limit_exceeded",
             msg=f"the sweep's {n_runs} runs total {agent_steps} agent-steps (N x steps), "
                 f"over this service's limit of {limits.max_sweep_agent_steps}")],
             {**numbers, "agent_steps": agent_steps})
-    errors = []
-    for run in runs:
-        errors += [FieldError(loc=f"runs[{run.index}].{e.loc}", type=e.type,
-                              msg=f"{e.msg} (run {run.index})")
-                   for e in check_limits(run.scenario, limits)]
-        if len(errors) >= MAX_REPORTED:
-            break
     if errors:
-        raise SweepLimitError(errors, {**numbers, "agent_steps": agent_steps})
-    return runs
+        raise SweepLimitError(errors[:MAX_REPORTED], {**numbers, "agent_steps": agent_steps})
+    return SweepScan(count, agent_steps, max_agents, kind)

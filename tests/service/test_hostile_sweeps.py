@@ -242,3 +242,34 @@ def test_k_a_cancel_then_a_worker_death_keeps_the_finished_runs(long_server: Ser
         done = wait_sweep(http, created["id"])
         assert done["status"] == "cancelled"
         _assert_runs_kept(http, long_server, done)
+
+
+def _peak_rss_mib(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    raise AssertionError("no VmHWM")
+
+
+def test_g_admitting_a_max_size_sweep_takes_bounded_memory(make_server):
+    """Checking a 10^5-run sweep held every expanded run (a validated scenario each):
+    bench/sweep_admission_memory.py measured +149 MiB of peak RSS for it before the runs
+    were checked one at a time, +1 MiB after; the server's peak grows ~31 MiB here."""
+    s = make_server({"FLOCKLAB_MAX_SWEEP_RUNS": "100000",
+                     "FLOCKLAB_MAX_SWEEP_AGENT_STEPS": str(10**12),
+                     "FLOCKLAB_MAX_BODY_BYTES": str(4 * 2**20),
+                     "FLOCKLAB_MAX_JSON_BYTES": str(4 * 2**20),
+                     "FLOCKLAB_MAX_QUEUED": "100"})
+    assert s.proc is not None
+    before = _peak_rss_mib(s.proc.pid)
+    spec = sweep_spec(etas=tuple(round(i * 5e-5, 6) for i in range(100_000)), replicas=1,
+                      name="max-size")
+    with httpx.Client(base_url=s.url, timeout=120) as http:
+        # Queued behind a job holding the worker, so only the API's admission is measured.
+        blocker = submit_job(http, scenario(n=1000, steps=100_000, every=0))
+        created = submit(http, spec)
+        assert created["runs_total"] == 100_000
+        peak = _peak_rss_mib(s.proc.pid)
+        for job in (f"/v1/sweeps/{created['id']}", f"/v1/jobs/{blocker['id']}"):
+            http.post(f"{job}/cancel")
+    assert peak - before < 75, (before, peak)
