@@ -82,9 +82,9 @@ def _events(http: httpx.Client, job_id: str) -> list[dict]:
     return rows
 
 
-def _assert_resumed(job: dict, data: Path, tmp: Path) -> int:
+def _assert_resumed(job: dict, data: Path, tmp: Path, attempts: int = 2) -> int:
     step = job["resumed_from_step"]
-    assert job["status"] == "succeeded" and job["attempts"] == 2, job
+    assert job["status"] == "succeeded" and job["attempts"] == attempts, job
     assert step is not None and 0 < step < STEPS and step % CHECKPOINT_EVERY == 0, job
     job_dir = data / "results" / job["id"]
     summary = json.loads((job_dir / "summary.json").read_text())
@@ -118,15 +118,19 @@ def test_a_job_whose_worker_is_killed_resumes_from_its_checkpoint_bit_identical(
     assert [e["steps_done"] for e in resumed] == sorted(e["steps_done"] for e in resumed)
 
 
-def _kill_service_mid_job(make_server, data: Path, seed: int) -> str:
-    """Submit the job, SIGKILL the API once it checkpointed, wait for its orphaned worker
-    to stop (its run lands stopped, checkpoint kept); the job's id."""
+def _kill_service_mid_job(make_server, data: Path, seed: int, graceful: bool = False) -> str:
+    """Submit the job, SIGKILL the API once it checkpointed (`graceful`: SIGTERM), wait
+    for its worker to stop (an orphan lands its run stopped, checkpoint kept); the
+    job's id."""
     s1 = make_server(data_dir=data)
     with httpx.Client(base_url=s1.url, timeout=30) as http:
         job = submit(http, {"scenario": SCENARIO})
         _wait_checkpoint(data, job["id"], random.Random(seed))
         workers = _workers(s1)
-    s1.kill()
+    if graceful:
+        s1.stop()
+    else:
+        s1.kill()
     deadline = time.monotonic() + 30
     while any(_alive(p) for p in workers) and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -142,12 +146,15 @@ def _finish_on_a_new_service(make_server, data: Path, job_id: str) -> dict:
 
 
 @pytest.mark.slow
-def test_a_job_of_a_killed_service_resumes_after_restart_bit_identical(make_server, tmp_path):
+@pytest.mark.parametrize("graceful", [False, True], ids=["kill-9", "sigterm"])
+def test_a_job_of_a_stopped_service_resumes_after_restart_bit_identical(
+        make_server, tmp_path, graceful):
     data = tmp_path / "data"
-    job_id = _kill_service_mid_job(make_server, data, seed=2)
+    job_id = _kill_service_mid_job(make_server, data, seed=2, graceful=graceful)
     done = _finish_on_a_new_service(make_server, data, job_id)
+    # A graceful stop re-queues the job without counting its attempt.
     assert done["error"] is None
-    _assert_resumed(done, data, tmp_path)
+    _assert_resumed(done, data, tmp_path, attempts=1 if graceful else 2)
 
 
 @pytest.mark.slow
