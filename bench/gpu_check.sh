@@ -11,7 +11,7 @@
 #   1. the engine tests on the GPU: grid = brute force, every model against its reference
 #      at small N (the CPU tests, with every "cpu" runtime request sent to the GPU by a
 #      small pytest plugin written below), and same seed -> same trajectory run to run
-#      (tests/test_schemas.py joins every backend it finds);
+#      (tests/schemas/test_schemas.py joins every backend it finds);
 #   2. statistical agreement of GPU and CPU runs where the bits differ: every preset
 #      family at small N over several seeds, mean final observables compared;
 #   3. one job of each model through `flocklab serve` with backend cuda and auto: each
@@ -265,17 +265,19 @@ EOF
 
 # ---- the steps ------------------------------------------------------------------------
 export FLOCKLAB_GPU_BACKEND="$BACKEND"
-ENGINE_TESTS=(tests/test_grid.py tests/test_vicsek.py tests/test_flocking.py
-              tests/test_flocking_reference.py tests/test_formation.py tests/test_obstacles.py)
+ENGINE_TESTS=(tests/kernels/space/test_grid.py tests/kernels/vicsek/test_vicsek.py
+              tests/kernels/flocking/test_flocking.py
+              tests/kernels/flocking/test_flocking_reference.py
+              tests/kernels/formation/test_formation.py tests/kernels/flocking/test_obstacles.py)
 if [ "$SMOKE" = 1 ]; then
-    ENGINE_TESTS=(tests/test_grid.py)
+    ENGINE_TESTS=(tests/kernels/space/test_grid.py)
 fi
 step "1a. engine tests on $BACKEND (grid = brute force, models vs reference)" 900 \
     env PYTHONPATH="$WORK${PYTHONPATH:+:$PYTHONPATH}" "$PY" -m pytest -q -x \
     -p flocklab_gpu_plugin -m "not slow" -p no:cacheprovider "${ENGINE_TESTS[@]}"
 step "1b. same seed -> same trajectory on every backend found, run to run" 600 \
     "$PY" -m pytest -q -p no:cacheprovider \
-    "tests/test_schemas.py::test_every_model_runs_reproducibly_on_every_available_backend"
+    "tests/schemas/test_schemas.py::test_every_model_runs_reproducibly_on_every_available_backend"
 SMOKE_ARG=$([ "$SMOKE" = 1 ] && echo smoke || echo full)
 step "2a. agreement runs on cpu" 900 "$PY" "$WORK/agree.py" run cpu "$WORK/cpu.json" "$SMOKE_ARG"
 step "2b. agreement runs on $BACKEND" 900 \

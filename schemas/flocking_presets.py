@@ -123,7 +123,7 @@ def tjp_switching_3d() -> dict:
         # R = 1.5: the first shell of the lattice and part of the second. With R = 2 (the
         # 2D presets' radius) the interior agents' 30-odd neighbours press pairs to 0.1 d,
         # where the barrier's stiffness outruns any practical Euler step (dt = 0.002
-        # still let Q rise and speeds reach 10^2): tests/test_presets_3d.py.
+        # still let Q rise and speeds reach 10^2): tests/schemas/test_presets_3d.py.
         "neighbours": {"radius": 1.5},
         "initial": {"kind": "random", "N": 1000, "speed_range": [0.0, 1.0],
                     "region": {"kind": "lattice", "low": [0.0, 0.0, 0.0], "spacing": 1.1,

@@ -1,6 +1,7 @@
 """A pytest plugin that runs the suite's model tests in float32 (docs/PRECISION.md):
 
-    python -m pytest -p tests.float32_plugin tests/test_vicsek.py tests/test_formation.py
+    python -m pytest -p tests.float32_plugin tests/kernels/vicsek/test_vicsek.py \
+        tests/kernels/formation/test_formation.py
 
 Every Scenario defaults to precision float32, and so does every direct runtime.ensure
 (the tests that build kernels themselves). The float64 tolerances then fail where float32

@@ -5,7 +5,7 @@ from typing import Any
 
 from flocklab import kernels
 from flocklab.schemas import Scenario
-from tests.test_flocking_fused import Frames
+from tests.kernels.flocking.test_flocking_fused import Frames
 
 
 def with_observables(sc: Scenario, names: list[str] | None, **recording: Any) -> Scenario:

@@ -13,7 +13,7 @@ numpy computes on the whole array, bit for bit:
 - numpy sums an (N, C) array over axis 0 row after row: `RowSum` carries the running
   row from block to block.
 - min, max and the first index of the minimum combine across blocks exactly.
-tests/test_stream.py checks each against numpy on the whole array.
+tests/kernels/space/test_stream.py checks each against numpy on the whole array.
 """
 
 import numpy as np

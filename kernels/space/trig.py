@@ -6,8 +6,8 @@ any argument); here one reduction by pi/2 (Cody-Waite, two constants: off by und
 |x| <= pi) feeds fdlibm's kernel polynomials (__kernel_sin, __kernel_cos: error below
 one ulp on |r| <= pi/4), and the quadrant picks the signs. The results agree with libm's
 to one ulp, and within 2^-60 absolute near the zeros of cos and sin, where one ulp of a
-value near 0 would need a third part of pi/2 (tests/test_trig.py checks 10^6 angles): a
-unit vector rotated by them is exact to a rounding. float32 runs compute the same in
+value near 0 would need a third part of pi/2 (tests/kernels/space/test_trig.py checks
+10^6 angles): a unit vector rotated by them is exact to a rounding. float32 runs compute the same in
 float64 and round each result once: cos and sin correctly rounded to float32 but for the
 rare value within 2^-29 ulp of a rounding boundary.
 """

@@ -21,10 +21,9 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.test_checkpoint import assert_same_run
-
-from .svc_helpers import submit, wait_for
-from .test_durability import _alive, _workers
+from tests.kernels.test_checkpoint import assert_same_run
+from tests.service.jobs.test_durability import _alive, _workers
+from tests.service.svc_helpers import submit, wait_for
 
 CHECKPOINT_EVERY = 200
 STEPS = 3000

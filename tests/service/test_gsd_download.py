@@ -12,7 +12,7 @@ import gsd.hoomd
 import numpy as np
 import pytest
 
-from .svc_helpers import assert_problem, scenario, submit, wait_for
+from tests.service.svc_helpers import assert_problem, scenario, submit, wait_for
 
 
 def test_gsd_download_is_the_jobs_file(http, server, tmp_path):

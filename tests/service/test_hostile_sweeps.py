@@ -16,11 +16,10 @@ import httpx
 import pytest
 
 from flocklab.service.serve import ServerProcess
-
-from .conftest import _cleanup
-from .svc_helpers import assert_problem, scenario, wait_for
-from .svc_helpers import submit as submit_job
-from .test_sweeps import SWEEP_ENV, _worker_pids, submit, sweep_spec, wait_sweep
+from tests.service.conftest import _cleanup
+from tests.service.svc_helpers import assert_problem, scenario, wait_for
+from tests.service.svc_helpers import submit as submit_job
+from tests.service.sweeps.test_sweeps import SWEEP_ENV, _worker_pids, submit, sweep_spec, wait_sweep
 
 
 @pytest.fixture(scope="module")

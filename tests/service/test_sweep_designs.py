@@ -8,8 +8,8 @@ from pathlib import Path
 
 import httpx
 
-from .svc_helpers import assert_problem
-from .test_sweeps import http, submit, sweep_server, sweep_spec, wait_sweep  # noqa: F401
+from tests.service.svc_helpers import assert_problem
+from tests.service.sweeps.test_sweeps import http, submit, sweep_server, sweep_spec, wait_sweep  # noqa: F401
 
 
 def design_spec() -> dict:

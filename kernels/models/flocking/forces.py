@@ -80,8 +80,8 @@ def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
                  blocks: bool = True):
     """(euler, accel) kernels over metric neighbours (`search`: all_pairs, hash, dense),
     specialised at compile time. On the dense grid they go by cell blocks unless `blocks`
-    is False (the per-agent visit: the same bits, which tests/test_flocking_by_cell.py
-    checks)."""
+    is False (the per-agent visit: the same bits, which
+    tests/kernels/flocking/test_flocking_by_cell.py checks)."""
     navigation = make_navigation(has_obstacles, unit_kappa, dim)
 
     @ti.func

@@ -122,7 +122,8 @@ def block_step_kernel(inclusive: bool, move_new: bool, dim: int, vectorial: bool
     """The vicsek rule's step in the periodic box with at least 3 cells across, by cell
     blocks (kernels/space/blocks.py): each agent's sum adds the same terms in the same
     order as in `step_kernel`'s visit, so the bits are the same
-    (tests/test_vicsek_by_cell.py). Vectorial noise counts n_i in the sums' column dim."""
+    (tests/kernels/vicsek/test_vicsek_by_cell.py). Vectorial noise counts n_i in the sums'
+    column dim."""
     finish = _finisher(RULES["vicsek"], True, move_new, dim, vectorial)
     lanes = dim + int(vectorial)
 
