@@ -83,6 +83,19 @@ def vector_rows(a) -> bool:
 
 
 @ti.func
+def sort_segment(a: ti.template(), lo, hi):
+    """Insertion sort of a[lo:hi], ascending: the stable order back after atomic slots
+    filled a segment in any order (short segments: a cell's agents, an agent's edges)."""
+    for k in range(lo + 1, hi):
+        v = a[k]
+        m = k - 1
+        while m >= lo and a[m] > v:
+            a[m + 1] = a[m]
+            m -= 1
+        a[m + 1] = v
+
+
+@ti.func
 def row(a: ti.template(), k, dim: ti.template()):
     """Row k of an (N, dim) array, or element k of an (N,) array of dim-vectors, as a
     dim-vector."""
@@ -307,14 +320,7 @@ def _scatter_parallel(key: nd, cursor: nd, perm: nd, src: nd, start: nd):
     for i in range(key.shape[0]):
         src[ti.atomic_add(cursor[key[i]], 1)] = i
     for b in range(start.shape[0] - 1):
-        lo = start[b]
-        for k in range(lo + 1, start[b + 1]):
-            v = src[k]
-            m = k - 1
-            while m >= lo and src[m] > v:
-                src[m + 1] = src[m]
-                m -= 1
-            src[m + 1] = v
+        sort_segment(src, start[b], start[b + 1])
     for k in range(key.shape[0]):
         perm[src[k]] = k
 

@@ -47,6 +47,7 @@ from .grid import (
     flat_cell,
     periodic_cell,
     row,
+    sort_segment,
     space_cell,
     widen,
 )
@@ -300,14 +301,7 @@ def _scatter_reverse(nbr: nd, cnt: nd, cursor: nd, in_start: nd, in_src: nd):
             if not in_row(nbr, cnt, j, i):
                 in_src[ti.atomic_add(cursor[j], 1)] = i
     for j in range(cnt.shape[0]):
-        lo = in_start[j]
-        for q in range(lo + 1, in_start[j + 1]):
-            v = in_src[q]
-            p = q - 1
-            while p >= lo and in_src[p] > v:
-                in_src[p + 1] = in_src[p]
-                p -= 1
-            in_src[p + 1] = v
+        sort_segment(in_src, in_start[j], in_start[j + 1])
 
 
 @ti.kernel
