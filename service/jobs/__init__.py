@@ -4,23 +4,24 @@ Nothing here imports FastAPI; only `worker.worker_main`, inside a spawned proces
 imports the engine (and so Taichi).
 """
 
-from .limits import Limits, check_limits
+from .admission import Admitted, LimitError, admit
+from .limits import Limits
 from .runtime import DataDirLocked, JobRuntime, data_dir_locked
-from .store import STATUSES, TERMINAL, IdempotencyConflict, Job, JobStore, NewJob, QueueFull
+from .store import IdempotencyConflict, Job, JobStore, NewJob, QueueFull
 from .supervisor import SupervisorConfig
 
 __all__ = [
-    "STATUSES",
-    "TERMINAL",
+    "Admitted",
     "DataDirLocked",
     "IdempotencyConflict",
     "Job",
     "JobRuntime",
     "JobStore",
+    "LimitError",
     "Limits",
     "NewJob",
     "QueueFull",
     "SupervisorConfig",
-    "check_limits",
+    "admit",
     "data_dir_locked",
 ]

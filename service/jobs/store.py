@@ -23,15 +23,13 @@ from pathlib import Path
 from typing import Any
 
 from flocklab.schemas.problems import json_safe
-
-TERMINAL = ("succeeded", "failed", "cancelled", "timed_out")
-STATUSES = ("queued", "running", *TERMINAL)
+from flocklab.schemas.status import STATES, TERMINAL_STATES
 
 _SCHEMA = f"""
 CREATE TABLE IF NOT EXISTS jobs (
     seq              INTEGER PRIMARY KEY AUTOINCREMENT,
     id               TEXT NOT NULL UNIQUE,
-    status           TEXT NOT NULL CHECK (status IN ({", ".join(repr(s) for s in STATUSES)})),
+    status           TEXT NOT NULL CHECK (status IN ({", ".join(repr(s) for s in STATES)})),
     scenario         TEXT NOT NULL,
     model_kind       TEXT NOT NULL,
     n_agents         INTEGER NOT NULL,
@@ -123,7 +121,7 @@ class Job:
 
     @property
     def terminal(self) -> bool:
-        return self.status in TERMINAL
+        return self.status in TERMINAL_STATES
 
     @property
     def problem(self) -> dict[str, Any] | None:
@@ -326,7 +324,7 @@ class JobStore:
         runs_failed: int | None = None,
     ) -> bool:
         """Make a running attempt terminal. False when the lease is no longer held."""
-        assert status in TERMINAL
+        assert status in TERMINAL_STATES
         with self._tx() as db:
             cur = db.execute(
                 "UPDATE jobs SET status = ?, finished_at = ?, error = ?, backend = ?,"

@@ -12,8 +12,15 @@ const TRAJECTORY_BUDGET = 48 * 2 ** 20;  // bytes of frames fetched for playback
 const $ = (id) => document.getElementById(id);
 const state = { key: sessionStorage.getItem(KEY_STORE) || "", presets: [], models: [],
                 selected: null, selectedSweep: null, follow: null, player: null, jobs: [],
-                sweeps: [], scenario: null };
-const TERMINAL = ["succeeded", "failed", "cancelled", "timed_out"];
+                sweeps: [], scenario: null, terminal: [] };
+
+/** The final job states, read from the API's description (`JobView.status`, the schema's
+ * one vocabulary): its enum lists the states in lifecycle order, the live ones up to
+ * "running" first; a job in any later state never changes again. */
+function terminalStates(openapi) {
+  const states = openapi.components.schemas.JobView.properties.status.enum;
+  return states.slice(states.indexOf("running") + 1);
+}
 
 // -- HTTP ---------------------------------------------------------------------------------
 
@@ -316,7 +323,7 @@ function showJob(job) {
   $("job-progress").value = job.progress;
   $("job-progress-text").textContent = `${Math.round(job.progress * 100)}%  `
     + `step ${job.steps_done}/${job.steps_total}`;
-  $("cancel").disabled = TERMINAL.includes(job.status);
+  $("cancel").disabled = state.terminal.includes(job.status);
   $("job-error").textContent = job.error ? `${job.error.title}: ${job.error.detail || ""}` : "";
   const row = document.querySelector(`#jobs tr[data-id="${job.id}"]`);
   if (row) {
@@ -350,7 +357,7 @@ async function follow(kind, id, { plotTitle, frames, show, load, live }) {
       const first = last === null;
       last = JSON.parse(data);
       show(last);
-      if (first && live && !TERMINAL.includes(last.status)) live(last, liveCtl.signal);
+      if (first && live && !state.terminal.includes(last.status)) live(last, liveCtl.signal);
     });
   } catch (err) {
     if (ctl.signal.aborted) return;
@@ -420,7 +427,7 @@ function showSweep(sw) {
   st.className = `status ${sw.status}`;
   $("job-progress").value = sw.progress;
   $("job-progress-text").textContent = `${Math.round(sw.progress * 100)}%  runs ${sweepRuns(sw)}`;
-  $("cancel").disabled = TERMINAL.includes(sw.status);
+  $("cancel").disabled = state.terminal.includes(sw.status);
   $("job-error").textContent = sw.error ? `${sw.error.title}: ${sw.error.detail || ""}` : "";
   const row = document.querySelector(`#sweeps tr[data-id="${sw.id}"]`);
   if (row) {
@@ -887,6 +894,7 @@ async function start() {
   try {
     state.presets = await api("/v1/presets");
     state.models = await api("/v1/models");
+    state.terminal = terminalStates(await api("/openapi.json"));
   } catch (err) {
     $("list-state").textContent = err.status === 401 ? "(enter the API key)" : `(${err.message})`;
     return;
