@@ -1,9 +1,9 @@
 """Admission limits: what a scenario may ask of this service (R12, R13).
 
-The schema bounds what is meaningful; these bound what this deployment accepts. The API
-checks them before enqueueing and the worker checks them again before running, so a job
-stored by an older, laxer configuration cannot run past the current limits. Pure Python
-(no FastAPI, no Taichi) because both processes import it.
+The schema bounds what is meaningful; these bound what this deployment accepts, and what
+a run costs (trajectory bytes, memory, observable rows). `admission.admit` applies them,
+in the API before storing a job and in the worker before running it. Pure Python (no
+FastAPI, no Taichi) because both processes import it.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ MAX_STEP_RADII = 10.0
 class Limits:
     """Per-job maxima; all are checked, the first violated ones are reported by field.
     A sweep's every run is held to them, and the sweep as a whole to the `max_sweep_*`
-    ones (see `sweep_limits`)."""
+    ones (see `admission`)."""
 
     max_agents: int
     max_steps: int

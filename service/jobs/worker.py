@@ -17,11 +17,14 @@ Cancellation is a shared integer the supervisor sets (read between engine steps 
 `should_stop`), so it works while the worker is busy and never reads the pipe mid-job.
 The worker also stops when its parent disappears (the API was killed): the restarted
 service re-runs the job, and this orphan must not keep the CPU.
+
+An order's `kind` picks its runner (`orders.ORDERS`); parsing and re-admitting the stored
+spec, and turning whatever a runner raises into the attempt's problem, are one path here
+for every kind.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import os
@@ -31,10 +34,11 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from .admission import LimitError, admit
 from .disk import disk_full_problem, is_disk_full, scrub_paths
-from .limits import Limits, check_limits
+from .limits import Limits
+from .orders import ORDERS, Attempt
 from .problems import cluster_problem, problem
-from .results import checksums
 
 log = logging.getLogger("flocklab.worker")
 
@@ -60,141 +64,57 @@ def worker_main(conn: Connection, cancel_flag: Any, config: dict[str, Any]) -> N
         if msg[0] == "stop":
             return
         order = msg[1]
-        token = order["token"]
-
-        def on_progress(done: int, total: int, token: str = token) -> None:
-            # A broken pipe means the supervisor is gone: should_stop ends the run.
-            with contextlib.suppress(OSError):
-                conn.send(("progress", token, int(done), int(total)))
-
-        def should_stop() -> bool:
-            return cancel_flag.value != 0 or orphaned()
-
-        def on_resumed(step: int | None, token: str = token) -> None:
-            with contextlib.suppress(OSError):
-                conn.send(("resumed", token, step))
-
-        if order.get("kind") == "sweep":
-            from .sweep_worker import run_sweep_order
-
-            outcome = run_sweep_order(order, conn, should_stop)
-        else:
-            outcome = _run_order(order, on_progress, should_stop, on_resumed)
+        outcome = _attempt(Attempt(order, conn, lambda: cancel_flag.value != 0 or orphaned()))
         outcome["rss"] = _rss_bytes()
         try:
-            conn.send(("result", token, outcome))
+            conn.send(("result", order["token"], outcome))
         except (BrokenPipeError, OSError):
             return
 
 
-def _run_order(order: dict[str, Any], on_progress: Any, should_stop: Any,
-               on_resumed: Any) -> dict[str, Any]:
-    """Re-validate and run one attempt (from its lost predecessor's checkpoint when the
-    order says `resume`); every failure becomes a problem body."""
+def _attempt(attempt: Attempt) -> dict[str, Any]:
+    """Re-validate and re-admit the stored spec, then run one attempt of it with its
+    kind's runner; every failure becomes a problem body."""
     from pydantic import ValidationError
 
     from flocklab.kernels.result import BackendUnavailable
-    from flocklab.schemas import Scenario, field_errors
-
-    try:
-        scenario = Scenario.model_validate_json(order["scenario"])
-    except ValidationError as exc:
-        errors = [e.model_dump() for e in field_errors(exc)]
-        return {"problem": problem("invalid-scenario", "Invalid scenario", 422,
-                                   "the stored scenario no longer validates", errors=errors)}
-    errors = check_limits(scenario, Limits(**order["limits"]))
-    if errors:
-        return {"problem": problem("limit-exceeded", "Over this service's limits", 422,
-                                   errors[0].msg, errors=[e.model_dump() for e in errors])}
-    from flocklab.service.sweeps.factory import make_executor
+    from flocklab.schemas import field_errors
+    from flocklab.schemas.sweep import SweepError
     from flocklab.service.sweeps.ray_executor import ClusterError
 
-    executor = make_executor(order.get("executor"))
-    on_ray = (order.get("executor") or {}).get("kind") == "ray"
-    # A Ray task gets its own threads: the CPUs it reserved on the cluster.
-    scenario, notes = _fit_threads(scenario, None if on_ray else order.get("threads"))
-    out_dir = Path(order["out_dir"])
+    order = attempt.order
+    kind = order.get("kind", "job")
+    how = ORDERS[kind]
     try:
-        if order.get("resume"):
-            summary = _resume(executor, scenario, out_dir, notes, on_progress, should_stop,
-                              on_resumed)
-        else:
-            summary = executor.run_job(scenario, out_dir, on_progress=on_progress,
-                                       should_stop=should_stop)
+        spec = how.spec.model_validate_json(order["scenario"])
+        admit(spec, Limits(**order["limits"]))
+    except (ValidationError, SweepError) as exc:
+        errors = field_errors(exc) if isinstance(exc, ValidationError) else exc.errors
+        return {"problem": problem(f"invalid-{how.noun}", f"Invalid {how.noun}", 422,
+                                   f"the stored {how.noun} no longer validates",
+                                   errors=[e.model_dump() for e in errors])}
+    except LimitError as exc:
+        return {"problem": problem("limit-exceeded", "Over this service's limits", 422,
+                                   str(exc), errors=[e.model_dump() for e in exc.errors],
+                                   **exc.numbers)}
+    try:
+        return how.run(spec, attempt)
     except BackendUnavailable as exc:
+        backend = {"backend": spec.backend} if kind == "job" else {}
         return {"problem": problem("backend-unavailable", "Backend unavailable", 503,
-                                   scrub_paths(str(exc)), backend=scenario.backend)}
-    except ClusterError as exc:
+                                   scrub_paths(str(exc)), **backend)}
+    except ClusterError as exc:  # unreachable, or lost mid-run: a sweep's finished runs stay
         return {"problem": cluster_problem(exc)}
-    except Exception as exc:  # an engine bug must fail this job, not the worker
-        log.error("job %s failed:\n%s", order["job_id"], traceback.format_exc())
+    except SweepError as exc:  # e.g. a measure's observable the model does not have
+        return {"problem": problem("invalid-sweep", "Invalid sweep", 422, str(exc),
+                                   errors=[e.model_dump() for e in exc.errors])}
+    except Exception as exc:  # an engine or runner bug must fail this attempt, not the worker
+        log.error("%s %s failed:\n%s", kind, order["job_id"], traceback.format_exc())
         if is_disk_full(exc):
-            return {"problem": disk_full_problem("while the job wrote its results")}
+            return {"problem": disk_full_problem(f"while the {kind} wrote its results")}
         # The message may name files under the data directory: clients never see paths.
         return {"problem": problem("internal-error", "Internal error", 500,
                                    scrub_paths(f"{type(exc).__name__}: {exc}"))}
-    if not (out_dir / "summary.json").exists():  # a job cancelled on Ray left no folder
-        return {"summary": summary, "checksums": {}}
-    if scenario.backend == "auto":
-        ran = summary.get("backend")
-        notes.append(f"backend 'auto' ran on {ran!r}" + (
-            ": no working GPU (cuda, vulkan) was found" if ran == "cpu" else ""))
-    if notes:
-        try:
-            _add_to_summary(out_dir, summary, backend_requested=scenario.backend, notes=notes)
-        except OSError as exc:
-            if is_disk_full(exc):
-                return {"problem": disk_full_problem("while the job wrote its results")}
-            return {"problem": problem("internal-error", "Internal error", 500,
-                                       scrub_paths(f"{type(exc).__name__}: {exc}"))}
-    return {"summary": summary, "checksums": checksums(out_dir)}
-
-
-def _resume(executor: Any, scenario: Any, out_dir: Path, notes: list[str], on_progress: Any,
-            should_stop: Any, on_resumed: Any) -> dict[str, Any]:
-    """Go on from the checkpoint the supervisor handed this attempt (the lost attempt's,
-    `ResultStore.adopt_checkpoint`), with that run's own scenario.json; a checkpoint that
-    cannot be resumed exactly (corrupted, another engine version) is dropped, with a
-    note, and the job runs again from step 0 (bits are never continued inexactly)."""
-    from flocklab.service.checkpoints import CheckpointRefused
-    from flocklab.service.execute import resume_dir
-
-    try:
-        return resume_dir(out_dir, on_progress=on_progress, should_stop=should_stop,
-                          on_resumed=on_resumed)
-    except CheckpointRefused as exc:
-        log.warning("job folder %s: checkpoint refused, running from step 0: %s",
-                    out_dir.name, exc)
-        on_resumed(None)
-        for p in (out_dir, *out_dir.parent.glob(f".{out_dir.name}.*")):
-            shutil.rmtree(p, ignore_errors=True)
-        notes.append(f"the lost attempt's checkpoint was refused ({scrub_paths(str(exc))}); "
-                     "the job ran again from step 0")
-        return executor.run_job(scenario, out_dir, on_progress=on_progress,
-                                should_stop=should_stop)
-
-
-def _fit_threads(scenario: Any, allowed: int | None) -> tuple[Any, list[str]]:
-    """The scenario with its thread count fitted to this worker's CPUs (R13), and a note
-    when a request had to be capped: more threads than cores only contend for them."""
-    if not allowed:
-        return scenario, []
-    if scenario.threads is None:
-        return scenario.model_copy(update={"threads": allowed}), []
-    if scenario.threads > allowed:
-        note = (f"threads capped from {scenario.threads} to {allowed}, the CPUs this "
-                f"service allots to a job")
-        return scenario.model_copy(update={"threads": allowed}), [note]
-    return scenario, []
-
-
-def _add_to_summary(out_dir: Path, summary: dict[str, Any], **extra: Any) -> None:
-    """Record what the service changed or chose in the job's summary.json (and `summary`)."""
-    summary.update(extra)
-    path = out_dir / "summary.json"
-    tmp = path.with_name(".summary.json.tmp")
-    tmp.write_text(json.dumps(summary, indent=2, allow_nan=False))
-    os.replace(tmp, path)
 
 
 def _warm_up(execute_to_dir: Any, preset: str, scratch: Path) -> None:
