@@ -1,5 +1,5 @@
 """Peak RSS and CPU of admitting a maximum-size sweep (issue 28 #1): what the API process
-spends in `parse_sweep_submission` on a 100,000-run sweep (1000 grid points x 100
+spends in `parse_submission("sweep", ...)` on a 100,000-run sweep (1000 grid points x 100
 replicas). Run: python bench/sweep_admission_memory.py [points] [replicas]."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import tempfile
 import time
 
 from flocklab.service.app.settings import Settings
-from flocklab.service.app.sweep_submission import parse_sweep_submission
+from flocklab.service.app.submit import parse_submission
 
 
 def main() -> None:
@@ -32,10 +32,10 @@ def main() -> None:
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     t0 = time.process_time()
     with tempfile.TemporaryDirectory() as d:
-        sub = parse_sweep_submission(raw, Settings(data_dir=d))
+        new = parse_submission("sweep", raw, Settings(data_dir=d))
     cpu = time.process_time() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(f"{sub.runs_total} runs, body {len(raw)} B: peak RSS {peak:.0f} MiB "
+    print(f"{new.steps_total} runs, body {len(raw)} B: peak RSS {peak:.0f} MiB "
           f"(+{peak - before:.0f} MiB over the {before:.0f} MiB before), {cpu:.1f} s CPU")
 
 

@@ -22,14 +22,13 @@ from flocklab.service.jobs import JobRuntime
 
 from .admission import AdmissionMiddleware
 from .auth import require_api_key
+from .bodies import JobRequest, SweepRequest
 from .body_limit import BodyLimitMiddleware
 from .events import ChangeHub
 from .problems import PROBLEM_MEDIA_TYPE, UnexpectedErrorMiddleware, install_problem_handlers
 from .routers import catalog, health, jobs, observables, render, results, sweeps
 from .settings import Settings, load_settings
-from .sweep_wire import SweepRequest
 from .viewer import install as install_viewer
-from .wire import JobRequest
 
 DESCRIPTION = """\
 Run published multi-agent flocking models as jobs.

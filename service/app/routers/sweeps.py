@@ -17,16 +17,14 @@ from fastapi.responses import FileResponse, JSONResponse, Response, StreamingRes
 from starlette.concurrency import run_in_threadpool
 
 from flocklab.schemas.status import SweepList, SweepState, SweepStatus
-from flocklab.service.jobs import IdempotencyConflict, Job, JobRuntime, NewJob, QueueFull
+from flocklab.service.jobs import Job, JobRuntime
 from flocklab.service.sweeps.tables import read_table
 
-from ..admission import queue_full, queue_gauge
+from ..bodies import EXAMPLE_SWEEP
 from ..deps import HubDep, RuntimeDep, SettingsDep, get_job
-from ..follow import Until, cancel_row, event_stream, long_poll
+from ..follow import Until, cancel_row, event_stream, list_page, long_poll
 from ..problems import ProblemError
-from ..sweep_submission import parse_sweep_submission
-from ..sweep_wire import EXAMPLE_SWEEP, sweep_view
-from .jobs import _decode_cursor, _encode_cursor
+from ..submit import accept
 
 router = APIRouter(prefix="/sweeps", tags=["sweeps"])
 
@@ -70,35 +68,7 @@ async def submit(
         description="Any unique string; retries with the same key return the same sweep.",
     )] = None,
 ) -> JSONResponse:
-    if not runtime.supervisor.alive:
-        raise ProblemError(503, "unavailable", "Service unavailable",
-                           "the job supervisor is not running", headers={"Retry-After": "30"})
-    raw = await request.body()
-    sub = await run_in_threadpool(parse_sweep_submission, raw, settings)
-    new = NewJob(scenario=sub.canonical, model_kind=sub.model_kind, n_agents=sub.max_agents,
-                 steps_total=sub.runs_total, timeout_seconds=sub.timeout_seconds,
-                 request_hash=sub.request_hash, idempotency_key=idempotency_key, kind="sweep")
-    try:
-        job, created = await run_in_threadpool(runtime.store.insert, new,
-                                               max_queued=settings.max_queued)
-    except QueueFull as exc:
-        gauge = queue_gauge(request.app)
-        assert gauge is not None  # the runtime exists: the store just answered
-        body, headers = queue_full(exc.queued, settings.max_queued, gauge)
-        raise ProblemError(429, "queue-full", body["title"], body["detail"],
-                           headers=headers, retry_after_seconds=body["retry_after_seconds"]
-                           ) from None
-    except IdempotencyConflict as exc:
-        raise ProblemError(409, "idempotency-conflict", "Idempotency key reused",
-                           f"this Idempotency-Key was used for {exc.job_id} with a "
-                           f"different request", job_id=exc.job_id) from None
-    if created:
-        runtime.supervisor.wake()
-    view = sweep_view(job, settings.result_ttl_seconds)
-    headers = {"Location": view.links["self"]}
-    if not created:
-        headers["Idempotent-Replayed"] = "true"
-    return JSONResponse(view.model_dump(mode="json"), status_code=202, headers=headers)
+    return await accept("sweep", request, runtime, settings, idempotency_key)
 
 
 @router.get("", response_model=SweepList, summary="List sweeps, newest first",
@@ -111,11 +81,8 @@ def list_sweeps(
     cursor: Annotated[str | None, Query(max_length=64, description="From `next_cursor`.")
                       ] = None,
 ) -> SweepList:
-    rows = runtime.store.list(statuses=status or (), before_seq=_decode_cursor(cursor),
-                              limit=limit, kind="sweep")
-    next_cursor = _encode_cursor(rows[-1].seq) if len(rows) == limit else None
-    return SweepList(items=[sweep_view(j, settings.result_ttl_seconds) for j in rows],
-                     next_cursor=next_cursor)
+    items, next_cursor = list_page("sweep", runtime, settings, status or (), limit, cursor)
+    return SweepList(items=items, next_cursor=next_cursor)
 
 
 @router.get("/{sweep_id}", response_model=SweepStatus, summary="Get a sweep",
@@ -135,8 +102,7 @@ async def get_sweep(
         "What a long-poll waits for: the sweep's end (default) or its next change."))
     ] = "finished",
 ) -> SweepStatus:
-    job = await long_poll(hub, str(sweep_id), lambda: _get(runtime, sweep_id), wait, until)
-    return sweep_view(job, settings.result_ttl_seconds)
+    return await long_poll("sweep", sweep_id, runtime, settings, hub, wait, until)
 
 
 @router.get("/{sweep_id}/spec", summary="The sweep as stored",
@@ -156,8 +122,7 @@ def spec(sweep_id: SweepId, runtime: RuntimeDep) -> Response:
              "failed, cancelled or timed out) gives 409 `sweep-finished` with `status_now`.",
              responses={401: {}, 404: {}, 409: {}, 422: {}})
 def cancel(sweep_id: SweepId, runtime: RuntimeDep, settings: SettingsDep) -> SweepStatus:
-    job = cancel_row(runtime, lambda: _get(runtime, sweep_id), "sweep")
-    return sweep_view(job, settings.result_ttl_seconds)
+    return cancel_row("sweep", sweep_id, runtime, settings)
 
 
 @router.get("/{sweep_id}/events", summary="Follow a sweep as Server-Sent Events",
@@ -169,9 +134,7 @@ def cancel(sweep_id: SweepId, runtime: RuntimeDep, settings: SettingsDep) -> Swe
                        401: {}, 404: {}, 422: {}})
 async def events(sweep_id: SweepId, runtime: RuntimeDep, settings: SettingsDep, hub: HubDep
                  ) -> StreamingResponse:
-    await run_in_threadpool(_get, runtime, sweep_id)
-    return event_stream(hub, str(sweep_id), lambda: _get(runtime, sweep_id),
-                        lambda j: sweep_view(j, settings.result_ttl_seconds), "sweep")
+    return await event_stream("sweep", sweep_id, runtime, settings, hub)
 
 
 Format = Annotated[Literal["csv", "json"] | None, Query(
