@@ -10,7 +10,6 @@ FastAPI.
         frames = job.trajectory(stride=10, agents=slice(0, 100))
 """
 
-from ._sweeps import SweepFailed
 from .aio import AsyncClient, AsyncJob, AsyncSweepJob
 from .errors import (
     APIError,
@@ -24,6 +23,7 @@ from .errors import (
     PayloadTooLarge,
     ServerError,
     ServiceUnavailable,
+    SweepFailed,
     TooManyRequests,
     Unauthorized,
     UnprocessableEntity,

@@ -1,6 +1,9 @@
-"""What the sync and async clients share: request building and response decoding.
+"""What the sync and async clients share: request building, response decoding and the
+handle base of a job of either kind (`HandleFields`: a run's `JobFields`, a sweep's
+`SweepFields`).
 
-The two clients differ only in whether they await httpx; everything else lives here.
+The two clients differ only in whether they await httpx; everything else lives here (a
+sweep's tables are decoded in `_tables`).
 """
 
 from __future__ import annotations
@@ -9,18 +12,21 @@ import base64
 import io
 import json
 import sys
+import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, ClassVar, TextIO
 
 import numpy as np
 
 from flocklab.schemas import Problem, Scenario
-from flocklab.schemas.status import JobView
+from flocklab.schemas.status import JobView, LifecycleView, SweepStatus
+from flocklab.schemas.sweep import Sweep
 from flocklab.schemas.version import version
 
+from .errors import JobTimeout
+
 DEFAULT_URL = "http://127.0.0.1:8000"
-TERMINAL = frozenset({"succeeded", "failed", "cancelled", "timed_out"})
 LONG_POLL_SECONDS = 10.0  # one GET ?wait= waits at most this long
 
 
@@ -32,9 +38,9 @@ def headers(api_key: str | None) -> dict[str, str]:
     return h
 
 
-def submission(scenario: Scenario | dict[str, Any] | None, preset: str | None,
-               overrides: dict[str, Any] | None, timeout_seconds: float | None
-               ) -> dict[str, Any]:
+def job_body(scenario: Scenario | dict[str, Any] | None, preset: str | None,
+             overrides: dict[str, Any] | None, timeout_seconds: float | None
+             ) -> dict[str, Any]:
     """The POST /v1/jobs body."""
     if (scenario is None) == (preset is None):
         raise ValueError("give exactly one of a scenario and preset=")
@@ -48,6 +54,25 @@ def submission(scenario: Scenario | dict[str, Any] | None, preset: str | None,
             raise ValueError("overrides= applies to a preset only")
         data = scenario.model_dump(mode="json") if isinstance(scenario, Scenario) else scenario
         body = {"scenario": data}
+    if timeout_seconds is not None:
+        body["timeout_seconds"] = timeout_seconds
+    return body
+
+
+def sweep_body(spec: Sweep | dict[str, Any] | None, sweep_preset: str | None,
+               timeout_seconds: float | None) -> dict[str, Any]:
+    """The POST /v1/sweeps body: the bare sweep, or wrapped (a named sweep, a timeout)."""
+    if (spec is None) == (sweep_preset is None):
+        raise ValueError("give exactly one of a sweep and sweep_preset=")
+    if sweep_preset is not None:
+        body: dict[str, Any] = {"sweep_preset": sweep_preset}
+    else:
+        sweep = spec.model_dump(mode="json") if isinstance(spec, Sweep) else spec
+        if not isinstance(sweep, dict):
+            raise TypeError("a sweep is a schemas.sweep.Sweep or a dict")
+        if timeout_seconds is None:
+            return sweep
+        body = {"sweep": sweep}
     if timeout_seconds is not None:
         body["timeout_seconds"] = timeout_seconds
     return body
@@ -106,10 +131,16 @@ def wait_params(wait: float, until: str) -> dict[str, Any] | None:
     return {"wait": wait} if until == "finished" else {"wait": wait, "until": until}
 
 
-def page_size_for(limit: int | None, page_size: int) -> int:
+def list_params(status: str | Sequence[str] | None, page_size: int, limit: int | None,
+                **filters: Any) -> dict[str, Any]:
+    """Query of a list GET: a page of `page_size` rows (fewer when `limit` wants fewer),
+    only these statuses, and the `filters` given (None: none)."""
     if limit is not None and limit < 1:
         raise ValueError("limit must be at least 1 (None: every job)")
-    return page_size if limit is None else min(page_size, limit)
+    params: dict[str, Any] = {"limit": page_size if limit is None else min(page_size, limit)}
+    if status is not None:
+        params["status"] = [status] if isinstance(status, str) else list(status)
+    return params | {k: v for k, v in filters.items() if v is not None}
 
 
 class SSEParser:
@@ -160,11 +191,15 @@ def observable_pages(pages: list[dict[str, Any]]) -> dict[str, Any]:
             "observables": obs}
 
 
-class JobFields:
-    """The fields of a job, shared by `Job` and `AsyncJob`: `state` is the `JobView` of the
-    last response (typed: datetimes, the error as a `Problem`), `data` the same as JSON."""
+class HandleFields:
+    """What every handle shares, a run's or a sweep's, sync or async: `state` is the view
+    of the last response (typed: datetimes, the error as a `Problem`), `data` the same as
+    JSON. The kinds set where they live (`route`) and what their view is (`view`)."""
 
-    state: JobView
+    view: ClassVar[type[LifecycleView]]
+    route: ClassVar[str]  # "/v1/jobs" or "/v1/sweeps"
+    noun: ClassVar[str]  # in messages: "job" or "sweep"
+    state: Any
     _data: dict[str, Any]
 
     @property
@@ -173,7 +208,7 @@ class JobFields:
 
     @data.setter
     def data(self, value: dict[str, Any]) -> None:
-        self.state = JobView.model_validate(value)
+        self.state = self.view.model_validate(value)
         self._data = value
 
     @property
@@ -181,16 +216,28 @@ class JobFields:
         return self.state.id
 
     @property
-    def status(self) -> str:
-        return self.state.status
-
-    @property
     def progress(self) -> float:
         return self.state.progress
 
     @property
     def done(self) -> bool:
-        return self.status in TERMINAL
+        return self.state.done
+
+    def path(self, tail: str = "") -> str:
+        return f"{self.route}/{self.id}{tail}"
+
+
+class JobFields(HandleFields):
+    """The fields of a run's handle (`Job`, `AsyncJob`)."""
+
+    view = JobView
+    route = "/v1/jobs"
+    noun = "job"
+    state: JobView
+
+    @property
+    def status(self) -> str:
+        return self.state.status
 
     @property
     def error(self) -> Problem | None:
@@ -199,6 +246,46 @@ class JobFields:
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.id} {self.status} {self.progress:.0%}>"
+
+
+class SweepFields(HandleFields):
+    """The fields of a sweep's handle (`SweepJob`, `AsyncSweepJob`); its `status()` is a
+    request (the sweep re-read), not a field."""
+
+    view = SweepStatus
+    route = "/v1/sweeps"
+    noun = "sweep"
+    state: SweepStatus
+
+    def __repr__(self) -> str:
+        s = self.state
+        return f"<{type(self).__name__} {s.id} {s.status} {s.runs_done}/{s.runs_total} runs>"
+
+
+class Waiter:
+    """`wait()`'s loop, less its request: `next()` draws the bar, then gives the seconds
+    of the next long-poll (None once the handle is done) or raises JobTimeout at the
+    deadline. A bar long-polls for each change (`until`), to show every step."""
+
+    def __init__(self, handle: HandleFields, timeout: float | None, progress: bool | None):
+        self.handle, self.timeout = handle, timeout
+        self.deadline = None if timeout is None else time.monotonic() + timeout
+        self.bar = ProgressBar(progress)
+        self.until = "change" if self.bar.enabled else "finished"
+
+    def next(self) -> float | None:
+        h = self.handle
+        self.bar.update(h)
+        if h.done:
+            return None
+        remaining = LONG_POLL_SECONDS if self.deadline is None else (
+            self.deadline - time.monotonic())
+        if remaining <= 0:
+            raise JobTimeout(f"{h.noun} {h.id} still {h.state.status} after {self.timeout} s")
+        return min(LONG_POLL_SECONDS, remaining)
+
+    def close(self) -> None:
+        self.bar.close()
 
 
 class ProgressBar:
@@ -211,12 +298,12 @@ class ProgressBar:
         self.enabled = self.stream.isatty() if enabled is None else enabled
         self._last = ""
 
-    def update(self, job: JobFields) -> None:
+    def update(self, handle: HandleFields) -> None:
         if not self.enabled:
             return
-        filled = int(job.progress * self.WIDTH)
-        line = (f"\r{job.id[:8]} [{'#' * filled}{'.' * (self.WIDTH - filled)}] "
-                f"{job.progress:4.0%} {job.status:<10}")
+        filled = int(handle.progress * self.WIDTH)
+        line = (f"\r{handle.id[:8]} [{'#' * filled}{'.' * (self.WIDTH - filled)}] "
+                f"{handle.progress:4.0%} {handle.state.status:<10}")
         if line != self._last:
             self._last = line
             self.stream.write(line)

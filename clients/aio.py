@@ -1,12 +1,12 @@
-"""The asynchronous twin of `clients.sync`: `AsyncClient` and `AsyncJob`."""
+"""The asynchronous twin of `clients.sync`: `AsyncClient` and its handles (`AsyncJob`,
+`AsyncSweepJob`: both an `AsyncHandle`)."""
 
 from __future__ import annotations
 
 import hashlib
-import time
 from collections.abc import AsyncIterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import httpx
 import numpy as np
@@ -15,11 +15,13 @@ from flocklab.schemas import Scenario
 from flocklab.schemas.status import SweepStatus
 from flocklab.schemas.sweep import Sweep
 
-from . import _core, _sweeps
-from .errors import JobTimeout, raise_for_status
+from . import _core, _tables
+from .errors import SweepFailed, raise_for_status
 
 if TYPE_CHECKING:
     import pandas
+
+H = TypeVar("H", bound="AsyncHandle")
 
 
 class AsyncClient:
@@ -65,58 +67,49 @@ class AsyncClient:
                      preset: str | None = None, overrides: dict[str, Any] | None = None,
                      timeout_seconds: float | None = None, idempotency_key: str | None = None
                      ) -> AsyncJob:
-        body = _core.submission(scenario, preset, overrides, timeout_seconds)
-        hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
-        r = await self.request("POST", "/v1/jobs", json=body, headers=hdrs)
-        return AsyncJob(self, r.json())
+        body = _core.job_body(scenario, preset, overrides, timeout_seconds)
+        return await self._submit(AsyncJob, body, idempotency_key)
 
     async def job(self, job_id: str) -> AsyncJob:
-        return AsyncJob(self, (await self.request("GET", f"/v1/jobs/{job_id}")).json())
+        return AsyncJob(self, (await self.request("GET", f"{AsyncJob.route}/{job_id}")).json())
 
-    async def jobs(self, status: str | Sequence[str] | None = None, model: str | None = None,
-                   page_size: int = 100, limit: int | None = None
-                   ) -> AsyncIterator[AsyncJob]:
-        params: dict[str, Any] = {"limit": _core.page_size_for(limit, page_size)}
-        if status is not None:
-            params["status"] = [status] if isinstance(status, str) else list(status)
-        if model is not None:
-            params["model"] = model
+    def jobs(self, status: str | Sequence[str] | None = None, model: str | None = None,
+             page_size: int = 100, limit: int | None = None) -> AsyncIterator[AsyncJob]:
+        return self._list(AsyncJob, status, page_size, limit, model=model)
+
+    async def sweep(self, spec: Sweep | dict[str, Any] | None = None, *,
+                    sweep_preset: str | None = None, timeout_seconds: float | None = None,
+                    idempotency_key: str | None = None) -> AsyncSweepJob:
+        body = _core.sweep_body(spec, sweep_preset, timeout_seconds)
+        return await self._submit(AsyncSweepJob, body, idempotency_key)
+
+    async def get_sweep(self, sweep_id: str) -> AsyncSweepJob:
+        r = await self.request("GET", f"{AsyncSweepJob.route}/{sweep_id}")
+        return AsyncSweepJob(self, r.json())
+
+    def sweeps(self, status: str | Sequence[str] | None = None, page_size: int = 100
+               ) -> AsyncIterator[AsyncSweepJob]:
+        return self._list(AsyncSweepJob, status, page_size, None)
+
+    async def _submit(self, cls: type[H], body: dict[str, Any], idempotency_key: str | None
+                      ) -> H:
+        hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
+        return cls(self, (await self.request("POST", cls.route, json=body, headers=hdrs)).json())
+
+    async def _list(self, cls: type[H], status: str | Sequence[str] | None, page_size: int,
+                    limit: int | None, **params: Any) -> AsyncIterator[H]:
+        query = _core.list_params(status, page_size, limit, **params)
         count = 0
         while True:
-            page = (await self.request("GET", "/v1/jobs", params=params)).json()
+            page = (await self.request("GET", cls.route, params=query)).json()
             for item in page["items"]:
-                yield AsyncJob(self, item)
+                yield cls(self, item)
                 count += 1
                 if limit is not None and count >= limit:
                     return
             if not page["next_cursor"]:
                 return
-            params["cursor"] = page["next_cursor"]
-
-    async def sweep(self, spec: Sweep | dict[str, Any] | None = None, *,
-                    sweep_preset: str | None = None, timeout_seconds: float | None = None,
-                    idempotency_key: str | None = None) -> AsyncSweepJob:
-        body = _sweeps.submission(spec, sweep_preset, timeout_seconds)
-        hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
-        r = await self.request("POST", "/v1/sweeps", json=body, headers=hdrs)
-        return AsyncSweepJob(self, SweepStatus.model_validate(r.json()))
-
-    async def get_sweep(self, sweep_id: str) -> AsyncSweepJob:
-        r = await self.request("GET", f"/v1/sweeps/{sweep_id}")
-        return AsyncSweepJob(self, SweepStatus.model_validate(r.json()))
-
-    async def sweeps(self, status: str | Sequence[str] | None = None, page_size: int = 100
-                     ) -> AsyncIterator[AsyncSweepJob]:
-        params: dict[str, Any] = {"limit": page_size}
-        if status is not None:
-            params["status"] = [status] if isinstance(status, str) else list(status)
-        while True:
-            page = (await self.request("GET", "/v1/sweeps", params=params)).json()
-            for item in page["items"]:
-                yield AsyncSweepJob(self, SweepStatus.model_validate(item))
-            if not page["next_cursor"]:
-                return
-            params["cursor"] = page["next_cursor"]
+            query["cursor"] = page["next_cursor"]
 
     async def models(self) -> list[dict[str, Any]]:
         return (await self.request("GET", "/v1/models")).json()
@@ -131,40 +124,45 @@ class AsyncClient:
         return (await self.request("GET", "/healthz")).json()
 
 
-class AsyncJob(_core.JobFields):
+class AsyncHandle(_core.HandleFields):
+    """The asynchronous twin of `clients.sync.Handle`."""
+
     def __init__(self, client: AsyncClient, data: dict[str, Any]):
         self.client = client
         self.data = data
 
-    async def refresh(self, wait: float = 0.0, until: str = "finished") -> AsyncJob:
-        r = await self.client.request("GET", f"/v1/jobs/{self.id}",
+    async def _get(self, wait: float = 0.0, until: str = "finished") -> None:
+        r = await self.client.request("GET", self.path(),
                                       params=_core.wait_params(wait, until),
                                       timeout=self.client.timeout + wait)
         self.data = r.json()
+
+    async def _wait(self, timeout: float | None, progress: bool | None) -> None:
+        waiter = _core.Waiter(self, timeout, progress)
+        try:
+            while (seconds := waiter.next()) is not None:
+                await self._get(seconds, waiter.until)
+        finally:
+            waiter.close()
+
+    async def _cancel(self) -> None:
+        self.data = (await self.client.request("POST", self.path("/cancel"))).json()
+
+
+class AsyncJob(_core.JobFields, AsyncHandle):
+    async def refresh(self, wait: float = 0.0, until: str = "finished") -> AsyncJob:
+        await self._get(wait, until)
         return self
 
     async def wait(self, timeout: float | None = None, progress: bool | None = None
                    ) -> AsyncJob:
-        deadline = None if timeout is None else time.monotonic() + timeout
-        bar = _core.ProgressBar(progress)
-        until = "change" if bar.enabled else "finished"
-        try:
-            bar.update(self)
-            while not self.done:
-                remaining = _core.LONG_POLL_SECONDS if deadline is None else (
-                    deadline - time.monotonic())
-                if remaining <= 0:
-                    raise JobTimeout(f"job {self.id} still {self.status} after {timeout} s")
-                await self.refresh(wait=min(_core.LONG_POLL_SECONDS, remaining), until=until)
-                bar.update(self)
-        finally:
-            bar.close()
+        await self._wait(timeout, progress)
         return self
 
     async def events(self) -> AsyncIterator[dict[str, Any]]:
         """The asynchronous twin of `Job.events()`."""
         parser = _core.SSEParser()
-        async with self.client.http.stream("GET", f"/v1/jobs/{self.id}/events",
+        async with self.client.http.stream("GET", self.path("/events"),
                                            headers={"Accept": "text/event-stream"}) as r:
             if r.status_code >= 400:
                 await r.aread()
@@ -178,7 +176,7 @@ class AsyncJob(_core.JobFields):
                         return
 
     async def cancel(self) -> AsyncJob:
-        self.data = (await self.client.request("POST", f"/v1/jobs/{self.id}/cancel")).json()
+        await self._cancel()
         return self
 
     async def metrics(self) -> dict[str, Any]:
@@ -229,52 +227,18 @@ class AsyncJob(_core.JobFields):
         return path
 
 
-class AsyncSweepJob:
+class AsyncSweepJob(_core.SweepFields, AsyncHandle):
     """The asynchronous twin of `clients.sync.SweepJob`."""
 
-    def __init__(self, client: AsyncClient, state: SweepStatus):
-        self.client = client
-        self.state = state
-
-    @property
-    def id(self) -> str:
-        return self.state.id
-
-    @property
-    def done(self) -> bool:
-        return self.state.status in _core.TERMINAL
-
-    def __repr__(self) -> str:
-        s = self.state
-        return f"<AsyncSweepJob {s.id} {s.status} {s.runs_done}/{s.runs_total} runs>"
-
     async def status(self, wait: float = 0.0, until: str = "finished") -> SweepStatus:
-        r = await self.client.request("GET", f"/v1/sweeps/{self.id}",
-                                      params=_core.wait_params(wait, until),
-                                      timeout=self.client.timeout + wait)
-        self.state = SweepStatus.model_validate(r.json())
+        await self._get(wait, until)
         return self.state
 
     async def wait(self, timeout: float | None = None, progress: bool | None = None
                    ) -> np.ndarray:
-        deadline = None if timeout is None else time.monotonic() + timeout
-        bar = _core.ProgressBar(progress)
-        until = "change" if bar.enabled else "finished"  # a bar shows every run's end
-        try:
-            bar.update(self.state)  # type: ignore[arg-type]
-            while not self.done:
-                remaining = _core.LONG_POLL_SECONDS if deadline is None else (
-                    deadline - time.monotonic())
-                if remaining <= 0:
-                    raise JobTimeout(f"sweep {self.id} still {self.state.status} after "
-                                     f"{timeout} s")
-                await self.status(wait=min(_core.LONG_POLL_SECONDS, remaining),
-                                  until=until)
-                bar.update(self.state)  # type: ignore[arg-type]
-        finally:
-            bar.close()
+        await self._wait(timeout, progress)
         if self.state.status != "succeeded":
-            raise _sweeps.SweepFailed(self.state)
+            raise SweepFailed(self.state)
         return await self.table()
 
     async def spec(self) -> Sweep:
@@ -282,14 +246,13 @@ class AsyncSweepJob:
         return Sweep.model_validate_json(r.content)
 
     async def cancel(self) -> SweepStatus:
-        r = await self.client.request("POST", f"/v1/sweeps/{self.id}/cancel")
-        self.state = SweepStatus.model_validate(r.json())
+        await self._cancel()
         return self.state
 
     async def table(self, name: str = "table") -> np.ndarray:
-        r = await self.client.request("GET", _sweeps.table_path(self.id, name),
+        r = await self.client.request("GET", _tables.table_path(self.id, name),
                                       params={"format": "json"})
-        return _sweeps.structured(r.json())
+        return _tables.structured(r.json())
 
     async def runs(self) -> np.ndarray:
         return await self.table("runs")
@@ -298,9 +261,9 @@ class AsyncSweepJob:
         return await self.table("series")
 
     async def table_frame(self, name: str = "table") -> pandas.DataFrame:
-        return _sweeps.frame(await self.table(name))
+        return _tables.frame(await self.table(name))
 
     async def csv(self, name: str = "table") -> str:
-        r = await self.client.request("GET", _sweeps.table_path(self.id, name),
+        r = await self.client.request("GET", _tables.table_path(self.id, name),
                                       params={"format": "csv"})
         return r.text

@@ -3,9 +3,12 @@ RFC 9457 problem body the service sent."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import httpx
+
+if TYPE_CHECKING:
+    from flocklab.schemas.status import SweepStatus
 
 
 class FlocklabError(Exception):
@@ -82,6 +85,18 @@ class ServiceUnavailable(ServerError):
 
 class JobTimeout(FlocklabError, TimeoutError):
     """`Job.wait` ran out of time; the job goes on running."""
+
+
+class SweepFailed(FlocklabError):
+    """`wait()` found the sweep ended without succeeding (failed, timed out, cancelled).
+    `status` is its final `SweepStatus`; the runs finished before the end may still be
+    fetched with `table()`."""
+
+    def __init__(self, status: SweepStatus):
+        self.status = status
+        why = f": {status.error.detail}" if status.error and status.error.detail else ""
+        super().__init__(f"sweep {status.id} {status.status} after {status.runs_done} of "
+                         f"{status.runs_total} runs{why}")
 
 
 _BY_STATUS: dict[int, type[APIError]] = {

@@ -1,12 +1,12 @@
-"""The synchronous client: `Client` and the `Job` handles it returns."""
+"""The synchronous client: `Client` and the handles it returns (`Job`, `SweepJob`: both a
+`Handle`, which refreshes, waits for and cancels a job of either kind)."""
 
 from __future__ import annotations
 
 import hashlib
-import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import httpx
 import numpy as np
@@ -15,11 +15,13 @@ from flocklab.schemas import Scenario
 from flocklab.schemas.status import SweepStatus
 from flocklab.schemas.sweep import Sweep
 
-from . import _core, _sweeps
-from .errors import JobTimeout, raise_for_status
+from . import _core, _tables
+from .errors import SweepFailed, raise_for_status
 
 if TYPE_CHECKING:
     import pandas
+
+H = TypeVar("H", bound="Handle")
 
 
 class Client:
@@ -65,41 +67,23 @@ class Client:
         raise_for_status(response)
         return response
 
-    # -- jobs -----------------------------------------------------------------------------
+    # -- jobs and sweeps -------------------------------------------------------------------
 
     def submit(self, scenario: Scenario | dict[str, Any] | None = None, *,
                preset: str | None = None, overrides: dict[str, Any] | None = None,
                timeout_seconds: float | None = None, idempotency_key: str | None = None
                ) -> Job:
         """Submit a scenario (a `Scenario` or a dict) or a preset; returns the queued job."""
-        body = _core.submission(scenario, preset, overrides, timeout_seconds)
-        hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
-        return Job(self, self.request("POST", "/v1/jobs", json=body, headers=hdrs).json())
+        body = _core.job_body(scenario, preset, overrides, timeout_seconds)
+        return self._submit(Job, body, idempotency_key)
 
     def job(self, job_id: str) -> Job:
-        return Job(self, self.request("GET", f"/v1/jobs/{job_id}").json())
+        return Job(self, self.request("GET", f"{Job.route}/{job_id}").json())
 
     def jobs(self, status: str | Sequence[str] | None = None, model: str | None = None,
              page_size: int = 100, limit: int | None = None) -> Iterator[Job]:
         """Jobs newest first, fetched a page at a time: every one, or the first `limit`."""
-        params: dict[str, Any] = {"limit": _core.page_size_for(limit, page_size)}
-        if status is not None:
-            params["status"] = [status] if isinstance(status, str) else list(status)
-        if model is not None:
-            params["model"] = model
-        count = 0
-        while True:
-            page = self.request("GET", "/v1/jobs", params=params).json()
-            for item in page["items"]:
-                yield Job(self, item)
-                count += 1
-                if limit is not None and count >= limit:
-                    return
-            if not page["next_cursor"]:
-                return
-            params["cursor"] = page["next_cursor"]
-
-    # -- sweeps ---------------------------------------------------------------------------
+        return self._list(Job, status, page_size, limit, model=model)
 
     def sweep(self, spec: Sweep | dict[str, Any] | None = None, *,
               sweep_preset: str | None = None, timeout_seconds: float | None = None,
@@ -109,28 +93,35 @@ class Client:
 
         >>> table = c.sweep(spec).wait()      # numpy structured array, a row per grid point
         """
-        body = _sweeps.submission(spec, sweep_preset, timeout_seconds)
-        hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
-        r = self.request("POST", "/v1/sweeps", json=body, headers=hdrs)
-        return SweepJob(self, SweepStatus.model_validate(r.json()))
+        body = _core.sweep_body(spec, sweep_preset, timeout_seconds)
+        return self._submit(SweepJob, body, idempotency_key)
 
     def get_sweep(self, sweep_id: str) -> SweepJob:
-        r = self.request("GET", f"/v1/sweeps/{sweep_id}")
-        return SweepJob(self, SweepStatus.model_validate(r.json()))
+        return SweepJob(self, self.request("GET", f"{SweepJob.route}/{sweep_id}").json())
 
     def sweeps(self, status: str | Sequence[str] | None = None, page_size: int = 100
                ) -> Iterator[SweepJob]:
         """Every sweep, newest first, fetched a page at a time."""
-        params: dict[str, Any] = {"limit": page_size}
-        if status is not None:
-            params["status"] = [status] if isinstance(status, str) else list(status)
+        return self._list(SweepJob, status, page_size, None)
+
+    def _submit(self, cls: type[H], body: dict[str, Any], idempotency_key: str | None) -> H:
+        hdrs = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
+        return cls(self, self.request("POST", cls.route, json=body, headers=hdrs).json())
+
+    def _list(self, cls: type[H], status: str | Sequence[str] | None, page_size: int,
+              limit: int | None, **params: Any) -> Iterator[H]:
+        query = _core.list_params(status, page_size, limit, **params)
+        count = 0
         while True:
-            page = self.request("GET", "/v1/sweeps", params=params).json()
+            page = self.request("GET", cls.route, params=query).json()
             for item in page["items"]:
-                yield SweepJob(self, SweepStatus.model_validate(item))
+                yield cls(self, item)
+                count += 1
+                if limit is not None and count >= limit:
+                    return
             if not page["next_cursor"]:
                 return
-            params["cursor"] = page["next_cursor"]
+            query["cursor"] = page["next_cursor"]
 
     # -- catalog --------------------------------------------------------------------------
 
@@ -147,19 +138,39 @@ class Client:
         return self.request("GET", "/healthz").json()
 
 
-class Job(_core.JobFields):
-    """A handle on one job; its fields are those of the last response (`refresh()`)."""
+class Handle(_core.HandleFields):
+    """A handle on a job of either kind; its fields are those of the last response."""
 
     def __init__(self, client: Client, data: dict[str, Any]):
         self.client = client
         self.data = data
 
+    def _get(self, wait: float = 0.0, until: str = "finished") -> None:
+        """Re-read; with `wait`, long-poll until it has finished (`until="change"`: until
+        it changes) or `wait` s pass."""
+        self.data = self.client.request("GET", self.path(),
+                                        params=_core.wait_params(wait, until),
+                                        timeout=self.client.timeout + wait).json()
+
+    def _wait(self, timeout: float | None, progress: bool | None) -> None:
+        waiter = _core.Waiter(self, timeout, progress)
+        try:
+            while (seconds := waiter.next()) is not None:
+                self._get(seconds, waiter.until)
+        finally:
+            waiter.close()
+
+    def _cancel(self) -> None:
+        self.data = self.client.request("POST", self.path("/cancel")).json()
+
+
+class Job(_core.JobFields, Handle):
+    """A handle on one job; its fields are those of the last response (`refresh()`)."""
+
     def refresh(self, wait: float = 0.0, until: str = "finished") -> Job:
         """Re-read the job; with `wait`, long-poll until it has finished (`until=
         "change"`: until it changes) or `wait` s pass."""
-        self.data = self.client.request("GET", f"/v1/jobs/{self.id}",
-                                        params=_core.wait_params(wait, until),
-                                        timeout=self.client.timeout + wait).json()
+        self._get(wait, until)
         return self
 
     def wait(self, timeout: float | None = None, progress: bool | None = None) -> Job:
@@ -168,20 +179,7 @@ class Job(_core.JobFields):
         Raises JobTimeout after `timeout` seconds. `progress` draws a bar on stderr
         (default: when stderr is a terminal), which long-polls for each change.
         """
-        deadline = None if timeout is None else time.monotonic() + timeout
-        bar = _core.ProgressBar(progress)
-        until = "change" if bar.enabled else "finished"
-        try:
-            bar.update(self)
-            while not self.done:
-                remaining = _core.LONG_POLL_SECONDS if deadline is None else (
-                    deadline - time.monotonic())
-                if remaining <= 0:
-                    raise JobTimeout(f"job {self.id} still {self.status} after {timeout} s")
-                self.refresh(wait=min(_core.LONG_POLL_SECONDS, remaining), until=until)
-                bar.update(self)
-        finally:
-            bar.close()
+        self._wait(timeout, progress)
         return self
 
     def events(self) -> Iterator[dict[str, Any]]:
@@ -189,7 +187,7 @@ class Job(_core.JobFields):
         `data`) at each change, and ends once it has finished (or the server shuts down:
         then `done` is still false)."""
         parser = _core.SSEParser()
-        with self.client.http.stream("GET", f"/v1/jobs/{self.id}/events",
+        with self.client.http.stream("GET", self.path("/events"),
                                      headers={"Accept": "text/event-stream"}) as r:
             if r.status_code >= 400:
                 r.read()
@@ -203,7 +201,7 @@ class Job(_core.JobFields):
                         return
 
     def cancel(self) -> Job:
-        self.data = self.client.request("POST", f"/v1/jobs/{self.id}/cancel").json()
+        self._cancel()
         return self
 
     def metrics(self) -> dict[str, Any]:
@@ -263,32 +261,13 @@ class Job(_core.JobFields):
 
 
 
-class SweepJob:
+class SweepJob(_core.SweepFields, Handle):
     """A handle on one sweep. `state` is the `SweepStatus` of the last response."""
-
-    def __init__(self, client: Client, state: SweepStatus):
-        self.client = client
-        self.state = state
-
-    @property
-    def id(self) -> str:
-        return self.state.id
-
-    @property
-    def done(self) -> bool:
-        return self.state.status in _core.TERMINAL
-
-    def __repr__(self) -> str:
-        s = self.state
-        return f"<SweepJob {s.id} {s.status} {s.runs_done}/{s.runs_total} runs>"
 
     def status(self, wait: float = 0.0, until: str = "finished") -> SweepStatus:
         """Re-read the sweep; with `wait`, long-poll until it has finished (`until=
         "change"`: until it changes) or `wait` s pass."""
-        r = self.client.request("GET", f"/v1/sweeps/{self.id}",
-                                params=_core.wait_params(wait, until),
-                                timeout=self.client.timeout + wait)
-        self.state = SweepStatus.model_validate(r.json())
+        self._get(wait, until)
         return self.state
 
     def wait(self, timeout: float | None = None, progress: bool | None = None) -> np.ndarray:
@@ -298,23 +277,9 @@ class SweepJob:
         after `timeout` seconds (the sweep goes on). `progress` draws a bar over runs on
         stderr (default: when stderr is a terminal).
         """
-        deadline = None if timeout is None else time.monotonic() + timeout
-        bar = _core.ProgressBar(progress)
-        until = "change" if bar.enabled else "finished"  # a bar shows every run's end
-        try:
-            bar.update(self.state)  # type: ignore[arg-type]
-            while not self.done:
-                remaining = _core.LONG_POLL_SECONDS if deadline is None else (
-                    deadline - time.monotonic())
-                if remaining <= 0:
-                    raise JobTimeout(f"sweep {self.id} still {self.state.status} after "
-                                     f"{timeout} s")
-                self.status(wait=min(_core.LONG_POLL_SECONDS, remaining), until=until)
-                bar.update(self.state)  # type: ignore[arg-type]
-        finally:
-            bar.close()
+        self._wait(timeout, progress)
         if self.state.status != "succeeded":
-            raise _sweeps.SweepFailed(self.state)
+            raise SweepFailed(self.state)
         return self.table()
 
     def spec(self) -> Sweep:
@@ -324,16 +289,15 @@ class SweepJob:
 
     def cancel(self) -> SweepStatus:
         """Stop the sweep; the runs it finished stay available (`table()`)."""
-        r = self.client.request("POST", f"/v1/sweeps/{self.id}/cancel")
-        self.state = SweepStatus.model_validate(r.json())
+        self._cancel()
         return self.state
 
     def table(self, name: str = "table") -> np.ndarray:
         """A row per grid point: the axes, then each measure's mean, sd, sem and count.
         `name` "runs" gives a row per run, "series" the replica-averaged time series."""
-        r = self.client.request("GET", _sweeps.table_path(self.id, name),
+        r = self.client.request("GET", _tables.table_path(self.id, name),
                                 params={"format": "json"})
-        return _sweeps.structured(r.json())
+        return _tables.structured(r.json())
 
     def runs(self) -> np.ndarray:
         return self.table("runs")
@@ -343,9 +307,9 @@ class SweepJob:
 
     def table_frame(self, name: str = "table") -> pandas.DataFrame:
         """`table(name)` as a pandas DataFrame (needs pandas, which flocklab does not)."""
-        return _sweeps.frame(self.table(name))
+        return _tables.frame(self.table(name))
 
     def csv(self, name: str = "table") -> str:
         """The table exactly as the service stores it (CSV text)."""
-        return self.client.request("GET", _sweeps.table_path(self.id, name),
+        return self.client.request("GET", _tables.table_path(self.id, name),
                                    params={"format": "csv"}).text

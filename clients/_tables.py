@@ -1,5 +1,5 @@
-"""What the sync and async sweep handles share: the request body, the table decoding and
-the state checks."""
+"""A sweep's tables on the client side: their routes and their decoding (JSON to a numpy
+structured array, or a pandas DataFrame)."""
 
 from __future__ import annotations
 
@@ -7,46 +7,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from flocklab.schemas.status import SweepStatus
-from flocklab.schemas.sweep import Sweep
-
-from .errors import FlocklabError
-
 if TYPE_CHECKING:
     import pandas
 
 TABLES = ("table", "runs", "series", "sensitivity")
-
-
-class SweepFailed(FlocklabError):
-    """`wait()` found the sweep ended without succeeding (failed, timed out, cancelled).
-    `status` is its final `SweepStatus`; the runs finished before the end may still be
-    fetched with `table()`."""
-
-    def __init__(self, status: SweepStatus):
-        self.status = status
-        why = f": {status.error.detail}" if status.error and status.error.detail else ""
-        super().__init__(f"sweep {status.id} {status.status} after {status.runs_done} of "
-                         f"{status.runs_total} runs{why}")
-
-
-def submission(spec: Sweep | dict[str, Any] | None, sweep_preset: str | None,
-               timeout_seconds: float | None) -> dict[str, Any]:
-    """The POST /v1/sweeps body: the bare sweep, or wrapped (a named sweep, a timeout)."""
-    if (spec is None) == (sweep_preset is None):
-        raise ValueError("give exactly one of a sweep and sweep_preset=")
-    if sweep_preset is not None:
-        body: dict[str, Any] = {"sweep_preset": sweep_preset}
-    else:
-        sweep = spec.model_dump(mode="json") if isinstance(spec, Sweep) else spec
-        if not isinstance(sweep, dict):
-            raise TypeError("a sweep is a schemas.sweep.Sweep or a dict")
-        if timeout_seconds is None:
-            return sweep
-        body = {"sweep": sweep}
-    if timeout_seconds is not None:
-        body["timeout_seconds"] = timeout_seconds
-    return body
 
 
 def table_path(sweep_id: str, name: str) -> str:
