@@ -22,7 +22,7 @@ from starlette.concurrency import run_in_threadpool
 from flocklab.service.jobs import Job, JobRuntime
 
 from .. import trajectory as traj
-from ..deps import JobId, RuntimeDep, SettingsDep, get_job
+from ..deps import JobId, RuntimeDep, SettingsDep, results_dir
 from ..observables import CorruptObservables, read_header, stream_metrics
 from ..problems import ProblemError
 from ..ranges import check_range
@@ -30,11 +30,6 @@ from ..ranges import check_range
 router = APIRouter(prefix="/jobs", tags=["results"])
 _ERRORS: dict[int | str, dict[str, Any]] = {401: {}, 404: {}, 409: {}, 410: {}, 422: {},
                                              500: {}}
-
-
-def _expired() -> ProblemError:
-    return ProblemError(410, "results-expired", "Results expired",
-                        "this job's results were deleted after the retention period")
 
 
 def corrupted(name: str) -> ProblemError:
@@ -45,23 +40,7 @@ def corrupted(name: str) -> ProblemError:
 
 
 def _results_dir(runtime: JobRuntime, job_id: JobId) -> tuple[Job, Path]:
-    job = get_job(runtime, job_id)
-    if job.results_expired:
-        raise _expired()
-    if not job.has_results:
-        if not job.terminal:
-            raise ProblemError(409, "results-pending", "Results not ready",
-                               f"the job is {job.status}", status_now=job.status)
-        raise ProblemError(404, "no-results", "No results",
-                           f"the job ended ({job.status}) without results")
-    folder = runtime.results.job_dir(job.id)
-    if not folder.is_dir():
-        if get_job(runtime, job_id).results_expired:  # the expiry sweep won the race
-            raise _expired()
-        raise ProblemError(410, "results-missing", "Results missing",
-                           "this job's results folder is gone from the server's disk although "
-                           "the results had not expired (deleted outside the service)")
-    return job, folder
+    return results_dir(runtime, job_id)
 
 
 @router.get("/{job_id}/metrics", summary="Summary and observables time series",
