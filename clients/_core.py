@@ -17,6 +17,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, ClassVar, TextIO
 
+import httpx
 import numpy as np
 
 from flocklab.schemas import Problem, Scenario
@@ -28,6 +29,30 @@ from .errors import JobTimeout
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 LONG_POLL_SECONDS = 10.0  # one GET ?wait= waits at most this long
+
+
+class ClientBase:
+    """What `Client` and `AsyncClient` hold: where the service is, how long a request may
+    take, the key, and the httpx client (of `httpx_class`), made on first use."""
+
+    httpx_class: ClassVar[type[httpx.Client] | type[httpx.AsyncClient]]
+
+    def __init__(self, base_url: str = DEFAULT_URL, api_key: str | None = None, *,
+                 transport: httpx.BaseTransport | httpx.AsyncBaseTransport | None = None,
+                 timeout: float = 30.0):
+        self.base_url = base_url.rstrip("/")
+        self.timeout = timeout
+        self._api_key = api_key
+        self._transport = transport
+        self._http: Any = None
+
+    @property
+    def http(self) -> Any:
+        if self._http is None:
+            self._http = self.httpx_class(base_url=self.base_url, headers=headers(self._api_key),
+                                          transport=self._transport,  # type: ignore[arg-type]
+                                          timeout=self.timeout)
+        return self._http
 
 
 def headers(api_key: str | None) -> dict[str, str]:
@@ -143,6 +168,26 @@ def list_params(status: str | Sequence[str] | None, page_size: int, limit: int |
     return params | {k: v for k, v in filters.items() if v is not None}
 
 
+class Pager:
+    """A list's loop, less its request: `take(page)` gives the page's rows (no more than
+    `limit` in all), then `query` asks for the next page, or is None: no more to fetch."""
+
+    def __init__(self, query: dict[str, Any], limit: int | None):
+        self.query: dict[str, Any] | None = query
+        self.limit, self.count = limit, 0
+
+    def take(self, page: dict[str, Any]) -> list[dict[str, Any]]:
+        items = page["items"]
+        if self.limit is not None:
+            items = items[:self.limit - self.count]
+        self.count += len(items)
+        if not page["next_cursor"] or (self.limit is not None and self.count >= self.limit):
+            self.query = None
+        elif self.query is not None:
+            self.query["cursor"] = page["next_cursor"]
+        return items
+
+
 class SSEParser:
     """Server-Sent Events from lines of text: `feed(line)` yields (event, data) at each
     blank line that ends an event; comments (keep-alives) are skipped."""
@@ -165,6 +210,26 @@ class SSEParser:
                 self.event = value
             elif field == "data":
                 self.data.append(value)
+
+
+class Follower:
+    """A handle's event stream (`…/events`), less its transport: `feed(line)` gives the
+    views that line completes (each also becomes the handle's `data`); `ended` turns true
+    once the stream says the job finished, or that the server is shutting down."""
+
+    def __init__(self, handle: HandleFields):
+        self.handle, self.parser, self.ended = handle, SSEParser(), False
+
+    def feed(self, line: str) -> list[dict[str, Any]]:
+        views = []
+        for event, data in self.parser.feed(line):
+            if event == self.handle.noun:
+                self.handle.data = data
+                views.append(data)
+            elif event in ("end", "shutdown"):
+                self.ended = True
+                break
+        return views
 
 
 def load_npz(content: bytes) -> dict[str, np.ndarray]:
@@ -263,9 +328,10 @@ class SweepFields(HandleFields):
 
 
 class Waiter:
-    """`wait()`'s loop, less its request: `next()` draws the bar, then gives the seconds
-    of the next long-poll (None once the handle is done) or raises JobTimeout at the
-    deadline. A bar long-polls for each change (`until`), to show every step."""
+    """`wait()`'s loop, less its request: iterating gives the seconds of each next
+    long-poll until the handle is done, drawing the bar before each, and raises
+    JobTimeout at the deadline; leaving the `with` block ends the bar's line. A bar
+    long-polls for each change (`until`), to show every step."""
 
     def __init__(self, handle: HandleFields, timeout: float | None, progress: bool | None):
         self.handle, self.timeout = handle, timeout
@@ -273,18 +339,22 @@ class Waiter:
         self.bar = ProgressBar(progress)
         self.until = "change" if self.bar.enabled else "finished"
 
-    def next(self) -> float | None:
+    def __iter__(self) -> Iterator[float]:
         h = self.handle
         self.bar.update(h)
-        if h.done:
-            return None
-        remaining = LONG_POLL_SECONDS if self.deadline is None else (
-            self.deadline - time.monotonic())
-        if remaining <= 0:
-            raise JobTimeout(f"{h.noun} {h.id} still {h.state.status} after {self.timeout} s")
-        return min(LONG_POLL_SECONDS, remaining)
+        while not h.done:
+            remaining = LONG_POLL_SECONDS if self.deadline is None else (
+                self.deadline - time.monotonic())
+            if remaining <= 0:
+                raise JobTimeout(f"{h.noun} {h.id} still {h.state.status} after "
+                                 f"{self.timeout} s")
+            yield min(LONG_POLL_SECONDS, remaining)
+            self.bar.update(h)
 
-    def close(self) -> None:
+    def __enter__(self) -> Waiter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
         self.bar.close()
 
 

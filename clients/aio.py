@@ -24,28 +24,15 @@ if TYPE_CHECKING:
 H = TypeVar("H", bound="AsyncHandle")
 
 
-class AsyncClient:
+class AsyncClient(_core.ClientBase):
     """Like `Client`, with every network call awaited.
 
     >>> async with AsyncClient() as c:
     ...     job = await (await c.submit(preset="vicsek-1995")).wait()
     """
 
-    def __init__(self, base_url: str = _core.DEFAULT_URL, api_key: str | None = None, *,
-                 transport: httpx.AsyncBaseTransport | None = None, timeout: float = 30.0):
-        self.base_url = base_url.rstrip("/")
-        self.timeout = timeout
-        self._api_key = api_key
-        self._transport = transport
-        self._http: httpx.AsyncClient | None = None
-
-    @property
-    def http(self) -> httpx.AsyncClient:
-        if self._http is None:
-            self._http = httpx.AsyncClient(base_url=self.base_url,
-                                           headers=_core.headers(self._api_key),
-                                           transport=self._transport, timeout=self.timeout)
-        return self._http
+    httpx_class = httpx.AsyncClient
+    http: httpx.AsyncClient
 
     async def aclose(self) -> None:
         if self._http is not None:
@@ -98,18 +85,11 @@ class AsyncClient:
 
     async def _list(self, cls: type[H], status: str | Sequence[str] | None, page_size: int,
                     limit: int | None, **params: Any) -> AsyncIterator[H]:
-        query = _core.list_params(status, page_size, limit, **params)
-        count = 0
-        while True:
-            page = (await self.request("GET", cls.route, params=query)).json()
-            for item in page["items"]:
+        pager = _core.Pager(_core.list_params(status, page_size, limit, **params), limit)
+        while pager.query is not None:
+            page = (await self.request("GET", cls.route, params=pager.query)).json()
+            for item in pager.take(page):
                 yield cls(self, item)
-                count += 1
-                if limit is not None and count >= limit:
-                    return
-            if not page["next_cursor"]:
-                return
-            query["cursor"] = page["next_cursor"]
 
     async def models(self) -> list[dict[str, Any]]:
         return (await self.request("GET", "/v1/models")).json()
@@ -138,12 +118,9 @@ class AsyncHandle(_core.HandleFields):
         self.data = r.json()
 
     async def _wait(self, timeout: float | None, progress: bool | None) -> None:
-        waiter = _core.Waiter(self, timeout, progress)
-        try:
-            while (seconds := waiter.next()) is not None:
+        with _core.Waiter(self, timeout, progress) as waiter:
+            for seconds in waiter:
                 await self._get(seconds, waiter.until)
-        finally:
-            waiter.close()
 
     async def _cancel(self) -> None:
         self.data = (await self.client.request("POST", self.path("/cancel"))).json()
@@ -161,19 +138,17 @@ class AsyncJob(_core.JobFields, AsyncHandle):
 
     async def events(self) -> AsyncIterator[dict[str, Any]]:
         """The asynchronous twin of `Job.events()`."""
-        parser = _core.SSEParser()
+        follower = _core.Follower(self)
         async with self.client.http.stream("GET", self.path("/events"),
                                            headers={"Accept": "text/event-stream"}) as r:
             if r.status_code >= 400:
                 await r.aread()
                 raise_for_status(r)
             async for line in r.aiter_lines():
-                for event, data in parser.feed(line):
-                    if event == "job":
-                        self.data = data
-                        yield data
-                    elif event in ("end", "shutdown"):
-                        return
+                for data in follower.feed(line):
+                    yield data
+                if follower.ended:
+                    return
 
     async def cancel(self) -> AsyncJob:
         await self._cancel()

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 H = TypeVar("H", bound="Handle")
 
 
-class Client:
+class Client(_core.ClientBase):
     """A flocklab service client.
 
     >>> with Client("http://127.0.0.1:8000") as c:
@@ -35,20 +35,8 @@ class Client:
     transport); the underlying httpx client is created on first use.
     """
 
-    def __init__(self, base_url: str = _core.DEFAULT_URL, api_key: str | None = None, *,
-                 transport: httpx.BaseTransport | None = None, timeout: float = 30.0):
-        self.base_url = base_url.rstrip("/")
-        self.timeout = timeout
-        self._api_key = api_key
-        self._transport = transport
-        self._http: httpx.Client | None = None
-
-    @property
-    def http(self) -> httpx.Client:
-        if self._http is None:
-            self._http = httpx.Client(base_url=self.base_url, headers=_core.headers(self._api_key),
-                                      transport=self._transport, timeout=self.timeout)
-        return self._http
+    httpx_class = httpx.Client
+    http: httpx.Client
 
     def close(self) -> None:
         if self._http is not None:
@@ -110,18 +98,10 @@ class Client:
 
     def _list(self, cls: type[H], status: str | Sequence[str] | None, page_size: int,
               limit: int | None, **params: Any) -> Iterator[H]:
-        query = _core.list_params(status, page_size, limit, **params)
-        count = 0
-        while True:
-            page = self.request("GET", cls.route, params=query).json()
-            for item in page["items"]:
+        pager = _core.Pager(_core.list_params(status, page_size, limit, **params), limit)
+        while pager.query is not None:
+            for item in pager.take(self.request("GET", cls.route, params=pager.query).json()):
                 yield cls(self, item)
-                count += 1
-                if limit is not None and count >= limit:
-                    return
-            if not page["next_cursor"]:
-                return
-            query["cursor"] = page["next_cursor"]
 
     # -- catalog --------------------------------------------------------------------------
 
@@ -153,12 +133,9 @@ class Handle(_core.HandleFields):
                                         timeout=self.client.timeout + wait).json()
 
     def _wait(self, timeout: float | None, progress: bool | None) -> None:
-        waiter = _core.Waiter(self, timeout, progress)
-        try:
-            while (seconds := waiter.next()) is not None:
+        with _core.Waiter(self, timeout, progress) as waiter:
+            for seconds in waiter:
                 self._get(seconds, waiter.until)
-        finally:
-            waiter.close()
 
     def _cancel(self) -> None:
         self.data = self.client.request("POST", self.path("/cancel")).json()
@@ -186,19 +163,16 @@ class Job(_core.JobFields, Handle):
         """Follow the job's Server-Sent Events: yields the job (as a dict, also kept in
         `data`) at each change, and ends once it has finished (or the server shuts down:
         then `done` is still false)."""
-        parser = _core.SSEParser()
+        follower = _core.Follower(self)
         with self.client.http.stream("GET", self.path("/events"),
                                      headers={"Accept": "text/event-stream"}) as r:
             if r.status_code >= 400:
                 r.read()
                 raise_for_status(r)
             for line in r.iter_lines():
-                for event, data in parser.feed(line):
-                    if event == "job":
-                        self.data = data
-                        yield data
-                    elif event in ("end", "shutdown"):
-                        return
+                yield from follower.feed(line)
+                if follower.ended:
+                    return
 
     def cancel(self) -> Job:
         self._cancel()
