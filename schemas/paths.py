@@ -94,8 +94,8 @@ def _copy(node: Any) -> Any:
 def merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     """Recursive merge of JSON objects (a preset's `overrides`); any other value replaces
     the base's. An override that switches a union member (a different `kind`) replaces the
-    object whole, so the old member's fields do not leak into the new one. (The same rule
-    as the job service's preset submissions.)"""
+    object whole, so the old member's fields do not leak into the new one. The job service's
+    preset submissions merge with it too."""
     out = dict(base)
     for key, value in overrides.items():
         old = out.get(key)

@@ -13,6 +13,7 @@ from typing import Annotated, Any, TypeVar
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from flocklab.schemas import PRESETS, FieldError, Scenario, field_errors
+from flocklab.schemas.paths import merge
 from flocklab.schemas.sweep import Sweep
 from flocklab.schemas.sweep_presets import SWEEP_PRESETS
 
@@ -144,24 +145,7 @@ def _from_preset(name: str, overrides: dict[str, Any]) -> Scenario:
         known = ", ".join(sorted(PRESETS))
         raise invalid([FieldError(loc="preset", msg=f"unknown preset {name!r}; known: {known}",
                                   type="unknown_preset")])
-    merged = _merge(PRESETS[name].build(), overrides)
+    merged = merge(PRESETS[name].build(), overrides)
     # allow_nan: a NaN in the overrides must reach the scenario's validation, which names
     # the field, rather than fail here without a path.
     return validate(Scenario, json.dumps(merged, allow_nan=True), ("overrides",))
-
-
-def _merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
-    """Recursive merge of JSON objects; any other value replaces the preset's.
-
-    An override that switches a union member (a different `kind`) replaces the object
-    whole, so the old member's fields do not leak into the new one.
-    """
-    out = dict(base)
-    for key, value in overrides.items():
-        old = out.get(key)
-        if (isinstance(old, dict) and isinstance(value, dict)
-                and value.get("kind", old.get("kind")) == old.get("kind")):
-            out[key] = _merge(old, value)
-        else:
-            out[key] = value
-    return out

@@ -3,32 +3,33 @@ what it refuses, checked against numbers worked out by hand."""
 
 import pytest
 
-from flocklab.schemas import Scenario
+from flocklab.schemas import Scenario, get_preset
 from flocklab.schemas.sweep import Sweep
 from flocklab.service.jobs.admission import Admitted, LimitError, admit
 from flocklab.service.jobs.limits import Limits
 
-BASE = {
-    "model": {"kind": "vicsek", "rule": "vicsek", "v0": 0.03, "eta": 0.5},
-    "space": {"kind": "periodic", "L": 10.0},
-    "neighbours": {"radius": 1.0},
-    "initial": {"kind": "random", "N": 100},
-    "time": {"steps": 50},
-    "recording": {"every": 0, "observables_every": 10},
-}
+
+def _base() -> dict:
+    """The Vicsek 1995 preset, small: N = 100 for 50 steps, no frames recorded."""
+    spec = get_preset("vicsek-1995").model_dump(mode="json")
+    spec["initial"]["N"], spec["time"]["steps"] = 100, 50
+    spec["recording"] = {"every": 0, "observables_every": 10}
+    return spec
+
+
 ROOMY = Limits(max_agents=10_000, max_steps=10_000, max_trajectory_bytes=2**30,
                max_memory_bytes=2**34)
 
 
 def _sweep(**extra: object) -> Sweep:
     return Sweep.model_validate({
-        "name": "n-scan", "base": BASE, "replicas": 2,
+        "name": "n-scan", "base": _base(), "replicas": 2,
         "axes": [{"path": "initial.N", "values": [100, 300, 200]}],
         "measure": {"va": {"observable": "polarization", "reduce": "mean"}}, **extra})
 
 
 def test_a_run_is_kept_as_its_model_agents_and_steps():
-    assert admit(Scenario.model_validate(BASE), ROOMY) == Admitted("vicsek", 100, 50)
+    assert admit(Scenario.model_validate(_base()), ROOMY) == Admitted("vicsek", 100, 50)
 
 
 def test_a_sweep_is_kept_as_its_largest_run_and_its_run_count():
@@ -38,7 +39,7 @@ def test_a_sweep_is_kept_as_its_largest_run_and_its_run_count():
 
 def test_a_run_over_a_limit_names_the_field():
     with pytest.raises(LimitError) as caught:
-        admit(Scenario.model_validate(BASE), Limits(50, 10_000, 2**30, 2**34))
+        admit(Scenario.model_validate(_base()), Limits(50, 10_000, 2**30, 2**34))
     assert [e.loc for e in caught.value.errors] == ["initial.N"]
     assert caught.value.numbers == {}
     assert str(caught.value).startswith("initial.N: N = 100 exceeds")
