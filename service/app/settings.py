@@ -101,6 +101,14 @@ class Settings(BaseSettings):
     max_connections: int = Field(
         default=1000, ge=1, description="Open connections before new ones get 503 (capped "
         "below the open-file limit).")
+    max_connections_per_client: int = Field(
+        default=64, ge=1, description="Open connections of one client (peer IP address) "
+        "before its new ones get 503, so one client cannot take every connection (behind a "
+        "reverse proxy every client is the proxy: raise it to max_connections there).")
+    healthz_headroom: int = Field(
+        default=16, ge=0, description="Connections past max_connections that are served "
+        "only for GET /healthz (one request each), so a liveness probe answers when the "
+        "cap is full.")
     header_timeout_seconds: float = Field(
         default=10.0, gt=0, description="A request line and headers must arrive within this "
         "(from the connection's start or its previous response), else 408 and close.")
