@@ -61,7 +61,8 @@ def cli_main(argv: list[str]) -> int:
     logging.basicConfig(level=args.log_level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     quiet_noisy_loggers()
-    cap = connection_cap(settings.max_connections, raise_fd_limit())
+    cap = connection_cap(settings.max_connections, raise_fd_limit(),
+                         settings.healthz_headroom)
     if cap < settings.max_connections:
         logging.getLogger("flocklab.connections").warning(
             "max_connections lowered from %d to %d to stay under the open-file limit",
@@ -69,7 +70,9 @@ def cli_main(argv: list[str]) -> int:
     app = create_app(settings)
     protocol = guarded_protocol(ConnectionLimits(
         header_timeout=settings.header_timeout_seconds,
-        body_timeout=settings.body_timeout_seconds, max_connections=cap))
+        body_timeout=settings.body_timeout_seconds, max_connections=cap,
+        max_per_client=min(cap, settings.max_connections_per_client),
+        healthz_headroom=settings.healthz_headroom))
     config = uvicorn.Config(app, host=args.host, port=args.port, log_level=args.log_level,
                             proxy_headers=False, server_header=False, http=protocol,
                             timeout_keep_alive=settings.keep_alive_seconds,

@@ -111,7 +111,9 @@ def queue_gauge(app: Any) -> QueueGauge | None:
     gauge = getattr(app.state, "queue_gauge", None)
     runtime = getattr(app.state, "runtime", None)
     if gauge is None and runtime is not None:
-        gauge = app.state.queue_gauge = QueueGauge(runtime.store.path)
+        settings = getattr(app.state, "settings", None)
+        gauge = app.state.queue_gauge = QueueGauge(
+            runtime.store.path, workers=settings.workers if settings is not None else 1)
     return gauge
 
 

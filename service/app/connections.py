@@ -12,6 +12,13 @@ times out and asyncio logs each failed accept). `GuardedH11Protocol` adds:
   connection is closed;
 - a cap on open connections (`max_connections`, kept below the open-file limit): one
   over it is answered `503` problem+json at once and closed, before it holds anything;
+- a cap per client (`max_connections_per_client`, by peer IP address, below the global
+  cap): one client holding many event streams, or reconnecting with headers it never
+  finishes, is refused on its own connections long before it fills the server, so other
+  clients still get in;
+- headroom for `/healthz` (`healthz_headroom` connections past the global cap): such a
+  connection is served only if its request line is `GET` or `HEAD /healthz`, and closed
+  after that one response, so a liveness probe answers even when clients fill the cap;
 - one log line per kind of event and interval with a count, instead of a line per
   connection (`QuietLog`), and the same for uvicorn's and asyncio's per-connection lines.
 
@@ -54,6 +61,8 @@ class ConnectionLimits:
     header_timeout: float
     body_timeout: float
     max_connections: int
+    max_per_client: int
+    healthz_headroom: int
 
 
 def raise_fd_limit() -> int:
@@ -69,9 +78,29 @@ def raise_fd_limit() -> int:
     return soft
 
 
-def connection_cap(wanted: int, fd_limit: int) -> int:
-    """`wanted`, lowered so that the cap can always be answered before descriptors run out."""
-    return max(1, min(wanted, fd_limit - RESERVED_FDS))
+def connection_cap(wanted: int, fd_limit: int, headroom: int = 0) -> int:
+    """`wanted`, lowered so that the cap (and the /healthz headroom above it) can always be
+    answered before descriptors run out."""
+    return max(1, min(wanted, fd_limit - RESERVED_FDS - headroom))
+
+
+# The longest request line a /healthz headroom connection may take to show its target.
+MAX_PROBE_LINE = 8192
+
+
+def is_healthz_line(head: bytes) -> bool:
+    """Whether a request line (up to its CRLF) asks for GET or HEAD /healthz."""
+    parts = head.split(b" ")
+    return (len(parts) == 3 and parts[0] in (b"GET", b"HEAD")
+            and parts[1].split(b"?", 1)[0] == b"/healthz")
+
+
+def peer_host(transport: Any) -> str:
+    """The client's address without its port (connections from one host share a quota)."""
+    peer = transport.get_extra_info("peername")
+    if isinstance(peer, tuple) and peer:
+        return str(peer[0])
+    return "local"  # a Unix socket: every client is this host
 
 
 class QuietLog:
@@ -136,22 +165,28 @@ def quiet_noisy_loggers() -> None:
         logging.getLogger(name).addFilter(flt)
 
 
-def _raw_problem(status: int, slug: str, title: str, detail: str) -> bytes:
+def _raw_problem(status: int, slug: str, title: str, detail: str,
+                 headers: dict[str, str] | None = None) -> bytes:
     """A complete HTTP/1.1 response with a problem body that closes the connection."""
     body = json.dumps(problem(slug, title, status, detail)).encode()
     head = (f"HTTP/1.1 {status} {title}\r\ncontent-type: application/problem+json\r\n"
             f"content-length: {len(body)}\r\nconnection: close\r\n")
-    if status == 503:
-        head += "retry-after: 1\r\n"
+    for name, value in (headers or {}).items():
+        head += f"{name.lower()}: {value}\r\n"
     return head.encode() + b"\r\n" + body
 
 
 def guarded_protocol(limits: ConnectionLimits) -> type[H11Protocol]:
     """uvicorn's h11 protocol with the limits above (a class per server's limits)."""
     quiet = QuietLog(log)
+    retry = {"Retry-After": "1"}
     refused = _raw_problem(503, "too-many-connections", "Service Unavailable",
                            f"the server holds its maximum of {limits.max_connections} "
-                           f"connections; retry shortly")
+                           f"connections; retry shortly", retry)
+    client_refused = _raw_problem(
+        503, "too-many-connections", "Service Unavailable",
+        f"this client holds its maximum of {limits.max_per_client} connections; close "
+        f"some (event streams, idle keep-alives) or retry shortly", retry)
     header_late = _raw_problem(408, "request-timeout", "Request Timeout",
                                f"the request line and headers did not arrive within "
                                f"{limits.header_timeout:g} s")
@@ -160,24 +195,50 @@ def guarded_protocol(limits: ConnectionLimits) -> type[H11Protocol]:
                              f"{limits.body_timeout:g} s of its headers")
 
     lingering = 0
+    # Connections served (not refused): within the cap, in the /healthz headroom, by host.
+    admitted = 0
+    probes = 0
+    per_client: dict[str, int] = {}
 
     class GuardedH11Protocol(H11Protocol):
         _deadline: asyncio.TimerHandle | None = None
         _phase: str | None = None  # "headers" | "body" while a deadline runs
         _refused = False
+        _host: str | None = None  # the client, while the connection is counted
+        _slot: str | None = None  # what it is counted in: "cap" or "headroom"
+        _probe: bytes | None = None  # headroom connection: its bytes until the request line
+        _closes_after_response = False  # a headroom connection that asked for /healthz
 
         def connection_made(self, transport: Any) -> None:
+            nonlocal admitted, probes
             super().connection_made(transport)
-            if len(self.connections) > limits.max_connections:
-                self._refuse(transport)
+            host = peer_host(transport)
+            # A client at its own cap gets neither a connection nor the headroom.
+            over_client = per_client.get(host, 0) >= limits.max_per_client
+            if admitted >= limits.max_connections:
+                if over_client or probes >= limits.healthz_headroom:
+                    quiet.note("cap", f"refused connections over the cap of "
+                                      f"{limits.max_connections}")
+                    self._refuse(transport, refused)
+                    return
+                probes += 1
+                self._probe, self._slot = b"", "headroom"
+            elif over_client:
+                quiet.note("client-cap", f"refused connections over the per-client cap of "
+                                         f"{limits.max_per_client}")
+                self._refuse(transport, client_refused)
                 return
+            else:
+                admitted += 1
+                self._slot = "cap"
+            self._host = host
+            per_client[host] = per_client.get(host, 0) + 1
             self._arm("headers")
 
-        def _refuse(self, transport: Any) -> None:
+        def _refuse(self, transport: Any, answer: bytes) -> None:
             nonlocal lingering
-            quiet.note("cap", f"refused connections over the cap of {limits.max_connections}")
             self._refused = True
-            transport.write(refused)
+            transport.write(answer)
             if lingering >= MAX_LINGERING:
                 transport.close()
                 return
@@ -193,17 +254,60 @@ def guarded_protocol(limits: ConnectionLimits) -> type[H11Protocol]:
         def data_received(self, data: bytes) -> None:
             if self._refused:
                 return  # answered already; this is the request we refused
+            if self._probe is not None:
+                data = self._screen_probe(data)
+                if not data:
+                    return
             super().data_received(data)
             self._follow()
 
+        def _screen_probe(self, data: bytes) -> bytes:
+            """A headroom connection's bytes, held back until its request line shows
+            whether it is /healthz; then all of them, or b"" (and a 503) if it is not."""
+            assert self._probe is not None
+            self._probe += data
+            line, crlf, _ = self._probe.partition(b"\r\n")
+            if not crlf and len(self._probe) < MAX_PROBE_LINE:
+                return b""
+            if crlf and is_healthz_line(line):
+                data, self._probe = self._probe, None
+                self._closes_after_response = True
+                return data
+            quiet.note("cap", f"refused connections over the cap of {limits.max_connections}")
+            self._disarm()
+            self._probe = None
+            self._release()
+            self._refuse(self.transport, refused)
+            return b""
+
         def on_response_complete(self) -> None:
             super().on_response_complete()
+            if self._closes_after_response:  # headroom serves one /healthz, then frees
+                self.transport.close()
+                return
             # Pipelined bytes may already hold (part of) the next request.
             self._follow()
 
         def connection_lost(self, exc: Exception | None) -> None:
             self._disarm()
+            self._release()
             super().connection_lost(exc)
+
+        def _release(self) -> None:
+            """Uncount this connection (once)."""
+            nonlocal admitted, probes
+            if self._host is None:
+                return
+            if self._slot == "headroom":
+                probes -= 1
+            else:
+                admitted -= 1
+            left = per_client[self._host] - 1
+            if left:
+                per_client[self._host] = left
+            else:
+                del per_client[self._host]
+            self._host = self._slot = None
 
         def _follow(self) -> None:
             """Keep the deadline that fits how far the current request has arrived."""

@@ -16,20 +16,19 @@ from pathlib import Path
 
 QUEUED_TTL_SECONDS = 0.1
 RATE_TTL_SECONDS = 1.0
-# Job starts over this window measure the drain rate.
-RATE_WINDOW_SECONDS = 60.0
-# Recent starts read to measure it (the newest jobs by sequence number).
+# Recent jobs (and sweeps) read to measure how long one holds a worker: the newest
+# finished rows by sequence number, plus the rows running now.
 RATE_SAMPLE = 256
 RETRY_AFTER_MIN, RETRY_AFTER_MAX = 1, 600
-# Retry-After when no job started within the window (a long job holds every worker).
-RETRY_AFTER_UNMEASURED = 60
 
 
 class QueueGauge:
-    """Thread-safe; opens its read-only connection on first use."""
+    """Thread-safe; opens its read-only connection on first use. `workers` is how many
+    jobs run at once (the supervisor's worker processes)."""
 
-    def __init__(self, db_path: Path):
+    def __init__(self, db_path: Path, workers: int = 1):
         self._path = db_path
+        self._workers = max(1, workers)
         self._db: sqlite3.Connection | None = None
         self._lock = threading.Lock()
         self._queued: tuple[float, int] = (-math.inf, 0)
@@ -53,7 +52,8 @@ class QueueGauge:
             return self._queued[1]
 
     def drain_rate(self) -> float | None:
-        """Jobs started per second over the last RATE_WINDOW_SECONDS; None when none did."""
+        """Queued jobs started per second while the workers are busy: workers / the mean
+        time a recent job held a worker; None when no job has run yet."""
         with self._lock:
             now = time.monotonic()
             if now - self._rate[0] >= RATE_TTL_SECONDS:
@@ -61,20 +61,28 @@ class QueueGauge:
             return self._rate[1]
 
     def _measure(self) -> float | None:
-        # Jobs start in sequence order, so the newest starts are among the newest rows.
-        rows = self._conn().execute(
-            "SELECT started_at FROM jobs WHERE started_at IS NOT NULL ORDER BY seq DESC "
-            "LIMIT ?", (RATE_SAMPLE,)).fetchall()
+        """workers / mean(seconds a job held a worker), over the newest finished jobs and
+        the running ones (their time so far, a lower bound). Time with the workers idle
+        does not count: a queue of 10 ms jobs drains at 100 per second per worker however
+        long the service sat idle before it filled (counting starts per wall-clock window
+        did, and said 60-427 s for a queue that drained in 2 s)."""
         wall = time.time()
-        starts = sorted(t for (t,) in rows if t >= wall - RATE_WINDOW_SECONDS)
-        if not starts:
+        rows = self._conn().execute(
+            "SELECT started_at, finished_at FROM jobs WHERE started_at IS NOT NULL AND "
+            "finished_at IS NOT NULL ORDER BY seq DESC LIMIT ?", (RATE_SAMPLE,)).fetchall()
+        rows += self._conn().execute(
+            "SELECT started_at, NULL FROM jobs WHERE status = 'running' AND "
+            "started_at IS NOT NULL").fetchall()
+        held = [max(0.0, (end if end is not None else wall) - start) for start, end in rows]
+        if not held:
             return None
-        span = max(1.0, wall - starts[0])
-        return len(starts) / span
+        # A floor of 1 ms a job: a rate, never a division by zero.
+        return self._workers / max(1e-3, sum(held) / len(held))
 
     def retry_after(self, queued: int) -> int:
-        """Seconds until the `queued` jobs now waiting have started, at the measured rate."""
+        """Seconds until the `queued` jobs now waiting have started, at the measured rate
+        (RETRY_AFTER_MIN when nothing has run yet: the workers are about to take them)."""
         rate = self.drain_rate()
         if rate is None:
-            return RETRY_AFTER_UNMEASURED
+            return RETRY_AFTER_MIN
         return int(min(RETRY_AFTER_MAX, max(RETRY_AFTER_MIN, math.ceil(queued / rate))))

@@ -101,6 +101,24 @@ class Settings(BaseSettings):
     max_connections: int = Field(
         default=1000, ge=1, description="Open connections before new ones get 503 (capped "
         "below the open-file limit).")
+    max_connections_per_client: int = Field(
+        default=64, ge=1, description="Open connections of one client (peer IP address) "
+        "before its new ones get 503, so one client cannot take every connection (behind a "
+        "reverse proxy every client is the proxy: raise it to max_connections there).")
+    healthz_headroom: int = Field(
+        default=16, ge=0, description="Connections past max_connections that are served "
+        "only for GET /healthz (one request each), so a liveness probe answers when the "
+        "cap is full.")
+    render_cache_bytes: int = Field(
+        default=1 * GiB, ge=0, description="Total size of the pictures and movies kept "
+        "after drawing (all results folders): past it the least recently used are deleted.")
+    render_slots: int = Field(
+        default_factory=lambda: max(2, available_cpus() // 2), ge=1,
+        description="Pictures drawn at once (child processes); default: half the CPUs, "
+        "at least 2.")
+    render_slots_per_client: int = Field(
+        default=1, ge=1, description="Of those, how many one client (peer IP address) may "
+        "hold; its other draws wait for its own.")
     header_timeout_seconds: float = Field(
         default=10.0, gt=0, description="A request line and headers must arrive within this "
         "(from the connection's start or its previous response), else 408 and close.")

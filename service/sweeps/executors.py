@@ -7,7 +7,10 @@ journal, the tables), so recording never depends on where a run ran. Runs stoppe
 bits for a run: each run's result is `kernels.run` of its scenario alone, wherever it ran.
 
 - `LocalExecutor`: `kernels.run_batch` in this process (the CLI's and a service worker's
-  behaviour before Ray existed).
+  behaviour before Ray existed). A run's `threads` is capped at the threads this process
+  is allotted (`FLOCKLAB_THREADS`, else its CPUs), as a job's is: Taichi starts a pool of
+  that many threads and keeps it until it is re-initialised, so a sweep asking for 1024
+  left 1,030 threads in the service's worker.
 - `RayExecutor` (ray_executor.py): batches of runs as Ray tasks on a cluster; this
   process is only the driver and never initialises Taichi.
 
@@ -20,7 +23,7 @@ from __future__ import annotations
 import os
 import shutil
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
@@ -73,20 +76,37 @@ class Executor(Protocol):
         """Run one job's scenario into out_dir (execute_to_dir); return its summary."""
 
 
+def allotted_threads() -> int:
+    """The CPU threads this process may give a run (the engine's default)."""
+    from flocklab.kernels.runtime import default_threads
+
+    return default_threads()
+
+
+def fit_threads(run: SweepRun, allowed: int) -> SweepRun:
+    """`run` with its scenario's `threads` at most `allowed` (more threads than the
+    process's CPUs only contend for them; same seed, same bits whatever the count)."""
+    threads = run.scenario.threads
+    if threads is None or threads <= allowed:
+        return run
+    return replace(run, scenario=run.scenario.model_copy(update={"threads": allowed}))
+
+
 class LocalExecutor:
     """Runs everything in this process, through the engine."""
 
     def run_sweep_runs(self, runs: Sequence[SweepRun], keep: str, out_dir: Path,
                        on_result: ResultFn, should_stop: StopFn) -> None:
+        allowed = allotted_threads()
         if keep == "all":
-            self._with_artifacts(runs, out_dir, on_result, should_stop)
+            self._with_artifacts(runs, allowed, out_dir, on_result, should_stop)
             return
         from flocklab import kernels
 
         for start in range(0, len(runs), BATCH_RUNS):
             if should_stop():
                 return
-            chunk = list(runs[start:start + BATCH_RUNS])
+            chunk = [fit_threads(r, allowed) for r in runs[start:start + BATCH_RUNS]]
 
             def done(i: int, result: RunResult, chunk: list[SweepRun] = chunk) -> None:
                 if result.status != "cancelled":  # a cancelled run is redone on resume
@@ -96,13 +116,13 @@ class LocalExecutor:
                               should_stop=should_stop)
 
     @staticmethod
-    def _with_artifacts(runs: Sequence[SweepRun], out_dir: Path, on_result: ResultFn,
-                        should_stop: StopFn) -> None:
+    def _with_artifacts(runs: Sequence[SweepRun], allowed: int, out_dir: Path,
+                        on_result: ResultFn, should_stop: StopFn) -> None:
         """keep = all: one run at a time through execute_to_dir (frames need a sink)."""
         for run in runs:
             if should_stop():
                 return
-            result = run_with_artifacts(run, out_dir, should_stop)
+            result = run_with_artifacts(fit_threads(run, allowed), out_dir, should_stop)
             if result is None:
                 return
             on_result(run, result)
@@ -110,6 +130,9 @@ class LocalExecutor:
     def probe(self, scenario: Scenario) -> RunResult:
         from flocklab import kernels
 
+        allowed = allotted_threads()
+        if scenario.threads is not None and scenario.threads > allowed:
+            scenario = scenario.model_copy(update={"threads": allowed})
         return kernels.run(scenario)
 
     def run_job(self, scenario: Scenario, out_dir: Path, *,

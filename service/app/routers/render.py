@@ -5,6 +5,8 @@ child process (matplotlib never loads in the API process, and a slow large-N dra
 holds the API's GIL), then kept in the job's results folder under `render/`, so it is
 served from disk afterwards and deleted with the results. The job routes' rules apply:
 the same auth, 404/409/410 for a missing, unfinished or expired job, problem+json errors.
+The cache is bounded in size and by the disk reserve (render_cache.py), and the draws at
+once are shared fairly between clients (render_slots.py).
 """
 
 from __future__ import annotations
@@ -31,13 +33,13 @@ from flocklab.service.render.limits import MAX_FPS, MIN_FPS
 
 from ..deps import JobId, RuntimeDep
 from ..problems import ProblemError, invalid
+from ..render_cache import RENDER_DIR, RenderCache
+from ..render_slots import RenderSlots
 from .results import _results_dir
 
 router = APIRouter(prefix="/jobs", tags=["results"])
 sweep_router = APIRouter(prefix="/sweeps", tags=["sweeps"])
 
-RENDER_DIR = "render"
-MAX_CONCURRENT_RENDERS = 2  # child processes drawing at once; more requests wait
 RENDER_TIMEOUT_SECONDS = 300.0
 _locks: dict[str, asyncio.Lock] = {}  # one draw per cache file at a time
 _ERRORS: dict[int | str, dict[str, Any]] = {401: {}, 404: {}, 409: {}, 410: {}, 422: {},
@@ -80,7 +82,7 @@ async def snapshot(
                                   type="value_error")])
     options = {"frame": frame, "time": time, "width": width, "height": height,
                "field": field, "edges": edges, "trails": trails, "overlays": overlays}
-    return await _render(request.app, lambda: _results_dir(runtime, job_id), "snapshot", "png",
+    return await _render(request, lambda: _results_dir(runtime, job_id), "snapshot", "png",
                          options)
 
 
@@ -99,7 +101,7 @@ async def observables(
         raise invalid([FieldError(loc="query.names", msg="at most 12 observables",
                                   type="value_error")])
     options = {"names": chosen, "width": width, "height": height}
-    return await _render(request.app, lambda: _results_dir(runtime, job_id), "observables", "png",
+    return await _render(request, lambda: _results_dir(runtime, job_id), "observables", "png",
                          options)
 
 
@@ -117,7 +119,7 @@ async def movie(
 ) -> FileResponse:
     options = {"width": width, "height": height, "fps": fps, "stride": stride,
                "field": field, "edges": edges, "overlays": overlays}
-    return await _render(request.app, lambda: _results_dir(runtime, job_id), "movie", "mp4",
+    return await _render(request, lambda: _results_dir(runtime, job_id), "movie", "mp4",
                          options)
 
 
@@ -137,51 +139,65 @@ async def sweep_plot(
 
     chosen = [n for n in (names or "").split(",") if n] or None
     options = {"names": chosen, "width": width, "height": height}
-    return await _render(request.app, lambda: sweep_results_dir(runtime, sweep_id), "sweep",
+    return await _render(request, lambda: sweep_results_dir(runtime, sweep_id), "sweep",
                          "png", options)
 
 
-async def _render(app: FastAPI, locate: Callable[[], tuple[Job, Path]], what: str, ext: str,
-                  options: dict[str, Any]) -> FileResponse:
+async def _render(request: Request, locate: Callable[[], tuple[Job, Path]], what: str,
+                  ext: str, options: dict[str, Any]) -> FileResponse:
     """Serve the cached picture of `what` for these options, drawing it first if need be.
     `locate` finds the results folder or raises the result routes' problems (a sweep's
     route passes its own, with what="sweep": the worker draws sweep folders too)."""
+    app = request.app
     job, folder = await run_in_threadpool(locate)
     key = hashlib.sha256(json.dumps([what, options], sort_keys=True).encode()).hexdigest()
     target = folder / RENDER_DIR / f"{what}-{key[:24]}.{ext}"
     media = "image/png" if ext == "png" else "video/mp4"
     filename = f"{job.id}-{what}.{ext}"
-    if not target.is_file():
+    cache = _cache(app)
+    if not await run_in_threadpool(cache.hit, target):
         lock = _locks.setdefault(str(target), asyncio.Lock())
         async with lock:
             if not target.is_file():  # another request may have drawn it meanwhile
+                client = request.client.host if request.client else "local"
                 try:
-                    await _draw(_slots(app), what, folder, target, options)
+                    await run_in_threadpool(cache.reserve)
+                    await _draw(_slots(app), client, what, folder, target, options)
                 except Exception:
                     # the results may have expired (their folder deleted) while drawing:
                     # then that is the answer (410), not the worker's failure to read or
                     # write them (a 422 "not a run folder", or a server error)
                     await run_in_threadpool(locate)
                     raise
+                await run_in_threadpool(cache.add, target)
         _locks.pop(str(target), None)
     return FileResponse(target, media_type=media, filename=filename,
                         content_disposition_type="inline")
 
 
-def _slots(app: FastAPI) -> asyncio.Semaphore:
+def _cache(app: FastAPI) -> RenderCache:
+    if not hasattr(app.state, "render_cache"):
+        s = app.state.settings
+        app.state.render_cache = RenderCache(app.state.runtime.results.root,
+                                             s.render_cache_bytes, s.min_free_disk_bytes)
+    return app.state.render_cache
+
+
+def _slots(app: FastAPI) -> RenderSlots:
     """The app's render slots (created on its own event loop, on first use)."""
     if not hasattr(app.state, "render_slots"):
-        app.state.render_slots = asyncio.Semaphore(MAX_CONCURRENT_RENDERS)
+        s = app.state.settings
+        app.state.render_slots = RenderSlots(s.render_slots, s.render_slots_per_client)
     return app.state.render_slots
 
 
-async def _draw(slots: asyncio.Semaphore, what: str, folder: Path, target: Path,
+async def _draw(slots: RenderSlots, client: str, what: str, folder: Path, target: Path,
                 options: dict[str, Any]) -> None:
     target.parent.mkdir(exist_ok=True)
     tmp = target.with_name(f".{target.stem}.{uuid.uuid4().hex[:8]}{target.suffix}")
     request = json.dumps({"what": what, "folder": str(folder), "out": str(tmp),
                           "options": options}).encode()
-    async with slots:
+    async with slots.slot(client):
         proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "flocklab.service.render.worker", stdin=asyncio.subprocess.PIPE,
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
@@ -197,7 +213,7 @@ async def _draw(slots: asyncio.Semaphore, what: str, folder: Path, target: Path,
             raise ProblemError(503, "render-timeout", "Rendering took too long",
                                f"the picture was not drawn within {RENDER_TIMEOUT_SECONDS:g} "
                                "s; ask for a smaller size, a stride, or a field",
-                               headers={"Retry-After": "60"}) from None
+                               headers={"Retry-After": str(slots.retry_after())}) from None
     if proc.returncode != 0:
         tmp.unlink(missing_ok=True)
         raise _failure(proc.returncode, out, err)
