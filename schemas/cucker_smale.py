@@ -39,10 +39,11 @@ class CuckerSmaleParams(ModelParams):
 
     paper: ClassVar[str] = "Cucker, Smale, Emergent behavior in flocks, IEEE TAC 52(5), 2007"
     equations: ClassVar[str] = (
-        "the model dx/dt = v, dv/dt = -L_x v with weights a_ij = psi(|x_i - x_j|) "
-        "(section 1 and 2, eq. 1-3; the paper's H / (1 + r^2)^beta is K = H, sigma = 1 "
-        "here), Theorem 1 (beta < 1/2: unconditional flocking); normalization 'local': "
-        "Motsch & Tadmor, J. Stat. Phys. 144, 2011, eq. 1.2"
+        "the model v_i(t+h) - v_i(t) = h sum_j a_ij (v_j - v_i), a_ij = H / (1 + r^2)^beta "
+        "(normalization 'sum'; K = H, sigma = 1; eq. 1 of the authors' 'Mathematics of "
+        "emergence', 2007, drawn from the TAC paper, whose numbers are to check), its "
+        "continuous form dv/dt = -L_x v, Theorem 1 (beta < 1/2: unconditional flocking); "
+        "'mean': lambda/N (Ha & Liu 2009); 'local': Motsch & Tadmor, J. Stat. Phys. 144, 2011"
     )
     summary: ClassVar[str] = (
         "Velocity alignment weighted by psi(r) = K / (sigma^2 + r^2)^beta, all-to-all "
