@@ -10,9 +10,10 @@ windows.
 Per replica and step s (state (x, v) in agent-id order):
   1. on an observation step, the observables of (x, v): both diameters over every pair,
      the mean velocity and the velocity variance;
-  2. u_i over every agent j (slots in id order: the per-step all-to-all path's order, so
-     its bits); a cutoff is law.py's weight test, pair by pair (at this N cheaper than a
-     cell list, and the same model);
+  2. u_i over every agent j, each pair once (psi is symmetric: half the weights of the
+     per-step schedule's per-agent sums, which sum in another order, so other bits); a
+     cutoff is law.py's weight test, pair by pair (at this N cheaper than a cell list, and
+     the same model);
   3. semi-implicit Euler, or RK4 in integrate.py's stage order. A non-finite value stops
      the replica and records the step.
 Covered up to FUSED_MAX_N agents (above it one replica's N^2 serial pairs outweigh the
@@ -30,7 +31,7 @@ from flocklab.schemas import Scenario
 from ... import runtime
 from ...replicas import FusedBatch, host_array
 from ...space.cells import SPREAD
-from ...space.grid import put, row
+from ...space.grid import row
 from ...space.initial import unit_rows
 from ...space.integrate import nonfinite
 from ...space.params import Slots
@@ -41,23 +42,44 @@ FUSED_MAX_N = 1024
 IP = Slots("STEPS", "EVERY", "BAD", "NOBS")
 OBS = ("step", "velocity_diameter", "position_diameter", "mean_velocity_x",
        "mean_velocity_y", "mean_velocity_z", "velocity_variance")
-ARRAYS = ("aoff", "ooff", "prm", "iprm", "pos", "vel", "acc", "xs", "vs", "xk", "vk", "obs")
+ARRAYS = ("aoff", "ooff", "prm", "iprm", "pos", "vel", "acc", "xs", "vs", "xk", "vk", "obs",
+          "den")
 
 
 @cache
-def advance_kernel(dim: int, local: bool, rk4: bool):
-    """The batch's kernel for one dimension, normalisation kind and integrator."""
+def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
+    """The batch's kernel for one dimension, normalisation kind, integrator and whether
+    the replicas have a cutoff."""
 
     @ti.func
-    def accel(a0, n, q, xsrc: ti.template(), vsrc: ti.template(), out: ti.template()):
-        """u_i of every agent of the replica (rows a0 .. a0 + n) at (xsrc, vsrc) into out."""
+    def accel(a0, n, q, xsrc: ti.template(), vsrc: ti.template(), out: ti.template(),
+              den: ti.template()):
+        """u_i of every agent of the replica (rows a0 .. a0 + n) at (xsrc, vsrc) into out:
+        each pair once (law.mutual_term), added to i and subtracted from j."""
         for i in range(a0, a0 + n):
-            xi = row(xsrc, i, dim)
-            vi = row(vsrc, i, dim)
-            acc = ti.Vector.zero(float, dim + 1)
-            for k in range(a0, a0 + n):
-                acc = law.pair_term(acc, row(xsrc, k, dim) - xi, row(vsrc, k, dim), vi, q)
-            put(out, i, law.acceleration(acc, q, local))
+            out[i] = ti.Vector.zero(float, dim)
+            if ti.static(local):
+                den[i] = law.weight(0.0, q)  # i's own weight in its D (a zero term in S)
+        for i in range(a0, a0 + n):
+            xi = xsrc[i]
+            vi = vsrc[i]
+            ai = ti.Vector.zero(float, dim)
+            di = 0.0
+            for k in range(i + 1, a0 + n):
+                w, t = law.mutual_term(xsrc[k] - xi, vsrc[k], vi, q, cut)
+                ai += t
+                out[k] -= t
+                if ti.static(local):  # mean and sum need no D_i
+                    di += w
+                    den[k] += w
+            out[i] += ai
+            if ti.static(local):
+                den[i] += di
+        for i in range(a0, a0 + n):
+            o = out[i]
+            d = den[i] if ti.static(local) else 0.0
+            out[i] = law.acceleration(ti.Vector([o[c] for c in ti.static(range(dim))] + [d]),
+                                      q, local)
 
     @ti.func
     def observe(b, s, a0, n, A: ti.template()):
@@ -91,38 +113,36 @@ def advance_kernel(dim: int, local: bool, rk4: bool):
     @ti.func
     def move(a0, n, q, A: ti.template()):
         """One step of the replica's agents; 1 if a value is not finite."""
-        pos, vel, acc, xs, vs, xk, vk = ti.static(A[4], A[5], A[6], A[7], A[8], A[9], A[10])
+        pos, vel, acc, xs, vs, xk, vk, den = ti.static(A[4], A[5], A[6], A[7], A[8], A[9],
+                                                       A[10], A[12])
         h = q[law.P.DT]
         bad = 0
-        accel(a0, n, q, pos, vel, acc)
+        accel(a0, n, q, pos, vel, acc, den)
         if ti.static(rk4):
             for i in range(a0, a0 + n):
-                for m in ti.static(range(dim)):
-                    xs[i, m] = pos[i, m]
-                    xk[i, m] = 0.0
-                    vs[i, m] = vel[i, m]
-                    vk[i, m] = 0.0
+                xs[i] = pos[i]
+                xk[i] = ti.Vector.zero(float, dim)
+                vs[i] = vel[i]
+                vk[i] = ti.Vector.zero(float, dim)
             for t in ti.static(range(3)):
                 w = 1.0 if t == 0 else 2.0
                 c = h if t == 2 else h / 2
-                for i in range(a0, a0 + n):
-                    for m in ti.static(range(dim)):  # integrate.py's stage order
-                        xk[i, m] += w * vs[i, m]
-                        xs[i, m] = pos[i, m] + c * vs[i, m]
-                        vk[i, m] += w * acc[i, m]
-                        vs[i, m] = vel[i, m] + c * acc[i, m]
-                accel(a0, n, q, xs, vs, acc)
+                for i in range(a0, a0 + n):  # integrate.py's stage order
+                    xk[i] += w * vs[i]
+                    xs[i] = pos[i] + c * vs[i]
+                    vk[i] += w * acc[i]
+                    vs[i] = vel[i] + c * acc[i]
+                accel(a0, n, q, xs, vs, acc, den)
             h6 = h / 6
             for i in range(a0, a0 + n):
-                for m in ti.static(range(dim)):
-                    pos[i, m] = pos[i, m] + h6 * (xk[i, m] + vs[i, m])
-                    vel[i, m] = vel[i, m] + h6 * (vk[i, m] + acc[i, m])
-                bad |= nonfinite(row(pos, i, dim), row(vel, i, dim))
+                pos[i] = pos[i] + h6 * (xk[i] + vs[i])
+                vel[i] = vel[i] + h6 * (vk[i] + acc[i])
+                bad |= nonfinite(pos[i], vel[i])
         else:
             for i in range(a0, a0 + n):
-                x, v = law.euler(row(pos, i, dim), row(vel, i, dim), row(acc, i, dim), h)
-                put(pos, i, x)
-                put(vel, i, v)
+                x, v = law.euler(pos[i], vel[i], acc[i], h)
+                pos[i] = x
+                vel[i] = v
                 bad |= nonfinite(x, v)
         return bad
 
@@ -143,10 +163,14 @@ def advance_kernel(dim: int, local: bool, rk4: bool):
                     iprm[b, IP.BAD] = s
             s += 1
 
+    # The state's (N, dim) arrays as N dim-vectors: one load per row (kernels/space/grid.py
+    # `row`), 10% of the step at N = 100 next to a load per component.
+    vnd = ti.types.ndarray(dtype=ti.types.vector(dim, float), ndim=1)
+
     @ti.kernel
-    def advance(s0: ti.i32, s1: ti.i32, aoff: nd, ooff: nd, prm: nd, iprm: nd, pos: nd,
-                vel: nd, acc: nd, xs: nd, vs: nd, xk: nd, vk: nd, obs: nd):
-        A = ti.static((aoff, ooff, prm, iprm, pos, vel, acc, xs, vs, xk, vk, obs))
+    def advance(s0: ti.i32, s1: ti.i32, aoff: nd, ooff: nd, prm: nd, iprm: nd, pos: vnd,
+                vel: vnd, acc: vnd, xs: vnd, vs: vnd, xk: vnd, vk: vnd, obs: nd, den: nd):
+        A = ti.static((aoff, ooff, prm, iprm, pos, vel, acc, xs, vs, xk, vk, obs, den))
         for t in range((aoff.shape[0] - 1) * SPREAD):
             if t % SPREAD == 0:  # one replica per CPU task
                 replica(t // SPREAD, s0, s1, A)
@@ -168,7 +192,8 @@ class CuckerSmaleBatch(FusedBatch):
         first = scenarios[0]
         self.dim = dim = first.dimension
         rk4 = first.model.integrator == "rk4"
-        self.kernel = advance_kernel(dim, first.model.normalization == "local", rk4)
+        self.kernel = advance_kernel(dim, first.model.normalization == "local", rk4,
+                                     first.model.cutoff is not None)
         ns = [s.n_agents for s in scenarios]
         self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
         rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
@@ -196,7 +221,7 @@ class CuckerSmaleBatch(FusedBatch):
             iprm=arr(iprm, np.int32), pos=arr(pos), vel=arr(vel),
             acc=arr(np.zeros((total, dim))), xs=arr(np.zeros(stage)),
             vs=arr(np.zeros(stage)), xk=arr(np.zeros(stage)), vk=arr(np.zeros(stage)),
-            obs=arr(np.zeros((int(self.ooff[-1]), len(OBS)))),
+            obs=arr(np.zeros((int(self.ooff[-1]), len(OBS)))), den=arr(np.zeros(total)),
         )
         assert tuple(self.args) == ARRAYS
 
@@ -244,4 +269,5 @@ class CuckerSmaleBatch(FusedBatch):
         p = scenario.model
         if scenario.n_agents > FUSED_MAX_N:
             return None
-        return ("cucker_smale", scenario.dimension, p.normalization == "local", p.integrator)
+        return ("cucker_smale", scenario.dimension, p.normalization == "local", p.integrator,
+                p.cutoff is not None)
