@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from ...space.stream import PairwiseSum, Rows, RowSum, blocks
+from ...space.stream import BLOCK, PairwiseSum, Rows, RowSum, blocks
 
 BRUTE = 2048  # pairwise comparison outright up to this many points
 PAIR_BLOCK = 256  # rows per block of the pairwise comparison
@@ -58,12 +58,13 @@ def hull_points(p: np.ndarray) -> np.ndarray:
         return p
 
 
-def diameter(rows: Rows, n: int) -> float:
-    """max_ij |a_i - a_j| of the device array that `rows` reads (n rows)."""
+def diameter(rows: Rows, n: int, block: int = BLOCK) -> float:
+    """max_ij |a_i - a_j| of the device array that `rows` reads (n rows, `block` at a
+    time: the block size `rows` was made with)."""
     if n <= BRUTE:
         return max_pair_distance(rows.wide(0, n).copy())
     cand = None
-    for lo, hi in blocks(n):
+    for lo, hi in blocks(n, block):
         block = rows.wide(lo, hi)
         pts = block if cand is None else np.concatenate([cand, block])
         cand = hull_points(pts).copy()
