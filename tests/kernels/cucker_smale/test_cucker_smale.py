@@ -225,3 +225,26 @@ def test_streamed_hull_diameter_is_the_pairwise_one(taichi_cpu, shape):
 def test_examples_validate():
     for path in sorted(EXAMPLES.glob("cucker_smale*.json")):
         Scenario.model_validate_json(path.read_text())
+
+
+@pytest.mark.parametrize(("path", "cutoff"), [("per_step", 1.3), ("fused", None),
+                                              ("fused", 1.3)])
+def test_a_run_resumed_from_a_checkpoint_has_the_uninterrupted_bits(path, cutoff):
+    """Checkpoints at every 25th step; the run resumed from the one at step 50 ends on the
+    uninterrupted run's frames and observables, bit for bit."""
+    spec = scenario(n=40, steps=100, every=20, cutoff=cutoff).model_dump(mode="json")
+    spec["recording"]["checkpoint_every"] = 25
+    sc = Scenario.model_validate(spec)
+    states = {}
+    full = Frames()
+    res = kernels.run(sc, path=path, sink=full,
+                      on_checkpoint=lambda step, state: states.__setitem__(step, state))
+    assert 50 in states
+    tail = Frames()
+    again = kernels.run(sc, path=path, sink=tail, resume=states[50])
+    assert tail.steps == full.steps[-len(tail.steps):] and tail.steps[0] > 50
+    for a, b in zip(full.pos[-len(tail.pos):] + full.vel[-len(tail.vel):],
+                    tail.pos + tail.vel, strict=True):
+        assert np.array_equal(a, b)
+    for k, v in res.observables.items():
+        assert np.array_equal(v, again.observables[k]), k
