@@ -31,7 +31,6 @@ from flocklab.schemas import Scenario
 from ... import runtime
 from ...replicas import FusedBatch, host_array
 from ...space.cells import SPREAD
-from ...space.grid import row
 from ...space.initial import unit_rows
 from ...space.integrate import nonfinite
 from ...space.params import Slots
@@ -87,25 +86,22 @@ def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
         ooff, iprm, pos, vel, obs = ti.static(A[1], A[3], A[4], A[5], A[11])
         r = ooff[b] + iprm[b, IP.NOBS]
         iprm[b, IP.NOBS] += 1
-        vd2, xd2 = 0.0, 0.0
+        d2 = ti.math.vec2(0.0, 0.0)
         mean = ti.Vector.zero(float, dim)
         for i in range(a0, a0 + n):
-            vi = row(vel, i, dim)
-            xi = row(pos, i, dim)
+            vi = vel[i]
+            xi = pos[i]
             mean += vi
             for k in range(i + 1, a0 + n):
-                dv = row(vel, k, dim) - vi
-                dx = row(pos, k, dim) - xi
-                vd2 = ti.max(vd2, dv.dot(dv))
-                xd2 = ti.max(xd2, dx.dot(dx))
+                d2 = law.spread(d2, vi, vel[k], xi, pos[k])
         mean /= n
         var = 0.0
         for i in range(a0, a0 + n):
-            d = row(vel, i, dim) - mean
+            d = vel[i] - mean
             var += d.dot(d)
         obs[r, 0] = s
-        obs[r, 1] = ti.sqrt(vd2)
-        obs[r, 2] = ti.sqrt(xd2)
+        obs[r, 1] = ti.sqrt(d2[0])
+        obs[r, 2] = ti.sqrt(d2[1])
         for c in ti.static(range(dim)):
             obs[r, 3 + c] = mean[c]
         obs[r, 6] = var / n

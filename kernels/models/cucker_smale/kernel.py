@@ -9,7 +9,6 @@ Observables (observe.py) at observation steps only.
 """
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 import taichi as ti
@@ -142,6 +141,3 @@ class CuckerSmaleKernel(ModelKernel):
 
     def convergence_keys(self) -> list[str]:
         return ["velocity_diameter"]
-
-    def extra(self) -> dict[str, Any]:
-        return {}

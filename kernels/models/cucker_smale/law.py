@@ -9,6 +9,7 @@ For agent i at x_i with velocity v_i:
                                                          its velocity term is 0)
   u_i = lambda S_i[:d] / D_i, D_i = N (mean), 1 (sum), S_i[d] (local: Motsch–Tadmor)
   semi-implicit Euler: v_i' = v_i + dt u_i, x_i' = x_i + dt v_i'.
+  observed: max_ij |v_i - v_j|, max_ij |x_i - x_j| (`spread`), the mean velocity.
 The velocity difference is summed (not sum w v_j - v_i sum w), so a settled flock's
 u_i is its rounding, not the cancellation of two large sums.
 """
@@ -109,6 +110,16 @@ def acceleration(acc, q, local: ti.template()):
         den = acc[dim]
     f = q[P.COUPLING] / den
     return ti.Vector([f * acc[c] for c in ti.static(range(dim))])
+
+
+@ti.func
+def spread(acc, vi, vj, xi, xj):
+    """acc = (max |v_i - v_j|^2, max |x_i - x_j|^2) folded over the pair (i, j): the
+    squared velocity and position diameters (observe.py streams the same definitions
+    through convex hulls on the host)."""
+    dv = vj - vi
+    dx = xj - xi
+    return ti.max(acc, ti.math.vec2(dv.dot(dv), dx.dot(dx)))
 
 
 @ti.func
