@@ -88,6 +88,7 @@ MODULES = {
     "flocking": "flocklab.kernels.models.flocking.kernel",
     "flocking_obstacles": "flocklab.kernels.models.flocking.obstacles",
     "formation": "flocklab.kernels.models.formation.kernel",
+    "cucker_smale": "flocklab.kernels.models.cucker_smale.kernel",
 }
 
 

@@ -8,6 +8,8 @@ from pydantic import Field
 
 from . import vicsek_presets  # noqa: F401  (registers the M1 presets)
 from .catalog import MODELS
+from .cucker_smale import CuckerSmaleParams  # noqa: F401  (registers Cucker-Smale)
+from .cucker_smale_presets import cucker_smale_2007  # noqa: F401  (its preset)
 from .flocking import FlockingParams  # noqa: F401  (registers M2)
 from .flocking_presets import tjp_fixed  # noqa: F401  (registers the M2 and M3 presets)
 from .formation import FormationParams  # noqa: F401  (registers M4)

@@ -1,0 +1,269 @@
+"""Cucker–Smale on the small-N path: many steps of many replicas in one kernel launch.
+
+The equations are law.py's; only the schedule differs from step.py's (as in
+kernels/models/vicsek/fused.py): one launch advances every replica of a batch through a
+window of steps, replicas in parallel (one per CPU task), each replica's steps and agents
+serial inside, the state kept in the kernel's arrays and the observables written into a
+per-replica buffer. A replica computes the same numbers alone, in a batch, or cut into any
+windows.
+
+Per replica and step s (state (x, v) in agent-id order):
+  1. on an observation step, the observables of (x, v): both diameters over every pair,
+     the mean velocity and the velocity variance;
+  2. u_i over every agent j, each pair once (psi is symmetric: half the weights of the
+     per-step schedule's per-agent sums, which sum in another order, so other bits); a
+     cutoff is law.py's weight test, pair by pair (at this N cheaper than a cell list, and
+     the same model);
+  3. semi-implicit Euler, or RK4 in integrate.py's stage order. A non-finite value stops
+     the replica and records the step.
+Covered up to FUSED_MAX_N agents (above it one replica's N^2 serial pairs outweigh the
+per-step schedule's launches).
+"""
+
+from functools import cache
+from typing import Any
+
+import numpy as np
+import taichi as ti
+
+from flocklab.schemas import Scenario
+
+from ... import runtime
+from ...replicas import FusedBatch, host_array
+from ...space.cells import SPREAD
+from ...space.initial import unit_rows
+from ...space.integrate import nonfinite
+from ...space.params import Slots
+from . import law
+
+nd = ti.types.ndarray()
+FUSED_MAX_N = 1024
+IP = Slots("STEPS", "EVERY", "BAD", "NOBS")
+OBS = ("step", "velocity_diameter", "position_diameter", "mean_velocity_x",
+       "mean_velocity_y", "mean_velocity_z", "velocity_variance")
+ARRAYS = ("aoff", "ooff", "prm", "iprm", "pos", "vel", "acc", "xs", "vs", "xk", "vk", "obs",
+          "den")
+
+
+@cache
+def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
+    """The batch's kernel for one dimension, normalisation kind, integrator and whether
+    the replicas have a cutoff."""
+
+    @ti.func
+    def accel(a0, n, q, xsrc: ti.template(), vsrc: ti.template(), out: ti.template(),
+              den: ti.template()):
+        """u_i of every agent of the replica (rows a0 .. a0 + n) at (xsrc, vsrc) into out:
+        each pair once (law.mutual_term), added to i and subtracted from j."""
+        for i in range(a0, a0 + n):
+            out[i] = ti.Vector.zero(float, dim)
+            if ti.static(local):
+                den[i] = law.weight(0.0, q)  # i's own weight in its D (a zero term in S)
+        for i in range(a0, a0 + n):
+            xi = xsrc[i]
+            vi = vsrc[i]
+            ai = ti.Vector.zero(float, dim)
+            di = 0.0
+            for k in range(i + 1, a0 + n):
+                w, t = law.mutual_term(xsrc[k] - xi, vsrc[k], vi, q, cut)
+                ai += t
+                out[k] -= t
+                if ti.static(local):  # mean and sum need no D_i
+                    di += w
+                    den[k] += w
+            out[i] += ai
+            if ti.static(local):
+                den[i] += di
+        for i in range(a0, a0 + n):
+            o = out[i]
+            d = den[i] if ti.static(local) else 0.0
+            out[i] = law.acceleration(ti.Vector([o[c] for c in ti.static(range(dim))] + [d]),
+                                      q, local)
+
+    @ti.func
+    def observe(b, s, a0, n, A: ti.template()):
+        """One row of observables of replica b's state at step s."""
+        ooff, iprm, pos, vel, obs = ti.static(A[1], A[3], A[4], A[5], A[11])
+        r = ooff[b] + iprm[b, IP.NOBS]
+        iprm[b, IP.NOBS] += 1
+        d2 = ti.math.vec2(0.0, 0.0)
+        mean = ti.Vector.zero(float, dim)
+        for i in range(a0, a0 + n):
+            vi = vel[i]
+            xi = pos[i]
+            mean += vi
+            for k in range(i + 1, a0 + n):
+                d2 = law.spread(d2, vi, vel[k], xi, pos[k])
+        mean /= n
+        var = 0.0
+        for i in range(a0, a0 + n):
+            d = vel[i] - mean
+            var += d.dot(d)
+        obs[r, 0] = s
+        obs[r, 1] = ti.sqrt(d2[0])
+        obs[r, 2] = ti.sqrt(d2[1])
+        for c in ti.static(range(dim)):
+            obs[r, 3 + c] = mean[c]
+        obs[r, 6] = var / n
+
+    @ti.func
+    def move(a0, n, q, A: ti.template()):
+        """One step of the replica's agents; 1 if a value is not finite."""
+        pos, vel, acc, xs, vs, xk, vk, den = ti.static(A[4], A[5], A[6], A[7], A[8], A[9],
+                                                       A[10], A[12])
+        h = q[law.P.DT]
+        bad = 0
+        accel(a0, n, q, pos, vel, acc, den)
+        if ti.static(rk4):
+            for i in range(a0, a0 + n):
+                xs[i] = pos[i]
+                xk[i] = ti.Vector.zero(float, dim)
+                vs[i] = vel[i]
+                vk[i] = ti.Vector.zero(float, dim)
+            for t in ti.static(range(3)):
+                w = 1.0 if t == 0 else 2.0
+                c = h if t == 2 else h / 2
+                for i in range(a0, a0 + n):  # integrate.py's stage order
+                    xk[i] += w * vs[i]
+                    xs[i] = pos[i] + c * vs[i]
+                    vk[i] += w * acc[i]
+                    vs[i] = vel[i] + c * acc[i]
+                accel(a0, n, q, xs, vs, acc, den)
+            h6 = h / 6
+            for i in range(a0, a0 + n):
+                pos[i] = pos[i] + h6 * (xk[i] + vs[i])
+                vel[i] = vel[i] + h6 * (vk[i] + acc[i])
+                bad |= nonfinite(pos[i], vel[i])
+        else:
+            for i in range(a0, a0 + n):
+                x, v = law.euler(pos[i], vel[i], acc[i], h)
+                pos[i] = x
+                vel[i] = v
+                bad |= nonfinite(x, v)
+        return bad
+
+    @ti.func
+    def replica(b, s0, s1, A: ti.template()):
+        """Replica b from step s0 towards s1 (serially: its steps, then its agents)."""
+        aoff, prm, iprm = ti.static(A[0], A[2], A[3])
+        a0 = aoff[b]
+        n = aoff[b + 1] - a0
+        q = ti.Vector([prm[b, c] for c in ti.static(range(law.P.size))], dt=float)
+        s = s0
+        while s < s1 and s <= iprm[b, IP.STEPS] and iprm[b, IP.BAD] < 0:
+            steps = iprm[b, IP.STEPS]
+            if s % iprm[b, IP.EVERY] == 0 or s == steps:
+                observe(b, s, a0, n, A)
+            if s < steps:
+                if move(a0, n, q, A) != 0:
+                    iprm[b, IP.BAD] = s
+            s += 1
+
+    # The state's (N, dim) arrays as N dim-vectors: one load per row (kernels/space/grid.py
+    # `row`), 10% of the step at N = 100 next to a load per component.
+    vnd = ti.types.ndarray(dtype=ti.types.vector(dim, float), ndim=1)
+
+    @ti.kernel
+    def advance(s0: ti.i32, s1: ti.i32, aoff: nd, ooff: nd, prm: nd, iprm: nd, pos: vnd,
+                vel: vnd, acc: vnd, xs: vnd, vs: vnd, xk: vnd, vk: vnd, obs: nd, den: nd):
+        A = ti.static((aoff, ooff, prm, iprm, pos, vel, acc, xs, vs, xk, vk, obs, den))
+        for t in range((aoff.shape[0] - 1) * SPREAD):
+            if t % SPREAD == 0:  # one replica per CPU task
+                replica(t // SPREAD, s0, s1, A)
+
+    return advance
+
+
+class CuckerSmaleBatch(FusedBatch):
+    """A batch of Cucker–Smale replicas (any N up to FUSED_MAX_N, parameters and steps
+    each; one dimension, integrator and normalisation kind)."""
+
+    dimensions = (2, 3)
+    CHECKPOINTS = True  # the whole state is in `args`
+
+    def __init__(self, scenarios: list[Scenario]):
+        from ...space.initial import initial_state
+
+        self.scenarios = scenarios
+        first = scenarios[0]
+        self.dim = dim = first.dimension
+        rk4 = first.model.integrator == "rk4"
+        self.kernel = advance_kernel(dim, first.model.normalization == "local", rk4,
+                                     first.model.cutoff is not None)
+        ns = [s.n_agents for s in scenarios]
+        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
+        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
+        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        total = int(self.aoff[-1])
+        B = len(scenarios)
+        prm = np.zeros((B, law.P.size))
+        iprm = np.zeros((B, IP.size), dtype=np.int32)
+        pos, vel = np.zeros((total, dim)), np.zeros((total, dim))
+        for b, sc in enumerate(scenarios):
+            prm[b] = law.parameters(sc.model, sc.n_agents, sc.time.dt)
+            iprm[b, [IP.STEPS, IP.EVERY, IP.BAD]] = [
+                sc.time.steps, sc.recording.observables_every, -1]
+            init = initial_state(sc)
+            a0, a1 = self.aoff[b], self.aoff[b + 1]
+            pos[a0:a1], vel[a0:a1] = init.positions, init.velocities
+
+        # numpy arrays the kernel runs on in place (FusedBatch): no from/to-numpy kernels.
+        def arr(a: np.ndarray, dtype: Any = float) -> np.ndarray:
+            return host_array(a, runtime.real() if dtype is float else dtype)
+
+        stage = (total, dim) if rk4 else (1, dim)
+        self.args = dict(
+            aoff=arr(self.aoff, np.int32), ooff=arr(self.ooff, np.int32), prm=arr(prm),
+            iprm=arr(iprm, np.int32), pos=arr(pos), vel=arr(vel),
+            acc=arr(np.zeros((total, dim))), xs=arr(np.zeros(stage)),
+            vs=arr(np.zeros(stage)), xk=arr(np.zeros(stage)), vk=arr(np.zeros(stage)),
+            obs=arr(np.zeros((int(self.ooff[-1]), len(OBS)))), den=arr(np.zeros(total)),
+        )
+        assert tuple(self.args) == ARRAYS
+
+    def advance(self, s0: int, s1: int) -> None:
+        """Advance every replica from step s0 towards s1 (each stops at its own end)."""
+        self.invalidate()
+        self.kernel(s0, s1, *(self.args[k] for k in ARRAYS))
+
+    def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
+        """The per-step path's observables, of those replica b's recording names."""
+        o0 = self.ooff[b]
+        rows = self.host("obs")[o0:o0 + iprm[b, IP.NOBS]].astype(np.float64)
+        wants = self.scenarios[b].recording.wants
+        keep = [c for c in OBS[1:] if wants(c) and not (c.endswith("_z") and self.dim == 2)]
+        return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
+
+    def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
+        a0, a1 = self.aoff[b], self.aoff[b + 1]
+        out = {}
+        if "position" in arrays:
+            out["position"] = self.host("pos")[a0:a1]
+        if "velocity" in arrays or "heading" in arrays:
+            vel = self.host("vel")[a0:a1]
+            if "velocity" in arrays:
+                out["velocity"] = vel
+            if "heading" in arrays:
+                out["heading"] = (unit_rows(vel) if self.dim == 3
+                                  else np.arctan2(vel[:, 1], vel[:, 0]))
+        return out
+
+    def convergence_keys(self) -> list[str]:
+        return ["velocity_diameter"]
+
+    def extra(self, b: int, iprm: np.ndarray) -> dict[str, Any]:
+        return {}
+
+    def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
+        step = int(iprm[b, IP.BAD])
+        return None if step < 0 else (step, "position/velocity", law.DIVERGED_CAUSE)
+
+    @staticmethod
+    def batch_key(scenario: Scenario) -> tuple | None:
+        """Scenarios with the same key share a launch; None (the per-step path) above
+        FUSED_MAX_N agents."""
+        p = scenario.model
+        if scenario.n_agents > FUSED_MAX_N:
+            return None
+        return ("cucker_smale", scenario.dimension, p.normalization == "local", p.integrator,
+                p.cutoff is not None)
