@@ -50,6 +50,7 @@ class CuckerSmaleParams(ModelParams):
         "(N <= 10^4) or with a cutoff on the grid (a cutoff changes the model)."
     )
     paper_inclusive: ClassVar[bool] = False
+    neighbour_kinds: ClassVar[tuple[str, ...]] = ()  # no neighbours block: all pairs or a cutoff
     neighbours_note: ClassVar[str] = (
         "none: all-to-all, or the pairs closer than model.cutoff (no neighbours block)")
     state_arrays: ClassVar[tuple[str, ...]] = ("position", "velocity", "heading")

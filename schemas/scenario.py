@@ -122,7 +122,8 @@ class Scenario(Strict):
         """neighbours.kind is one the model runs with (topological: the Vicsek family)."""
         nb = self.neighbours
         kinds = type(self.model).neighbour_kinds
-        if nb is not None and nb.kind not in kinds:
+        # A model with no neighbour kinds refuses any neighbours block in its own words.
+        if nb is not None and kinds and nb.kind not in kinds:
             with_it = [k for k, m in MODELS.items() if nb.kind in m.neighbour_kinds]
             raise ValueError(
                 f"neighbours.kind: model {self.model.kind} takes {' or '.join(kinds)} "

@@ -18,13 +18,16 @@ def print_model(m: dict[str, Any]) -> None:
     print(f"{m['kind']}: {m['summary']}")
     print(f"  paper: {m['paper']} (full reference: {REFERENCES})")
     print(f"  equations: {m['equations']}")
-    print(f"  neighbourhood: |r_ij| {'<=' if m['paper_inclusive'] else '<'} radius "
-          f"(paper's choice); state: {', '.join(m['state'])}")
     kinds = m.get("neighbour_kinds", ["metric"])
+    if not kinds:  # the model takes no neighbours block; its card says what it uses
+        print(f"  neighbours: {m['neighbours_note']}; state: {', '.join(m['state'])}")
+    else:
+        print(f"  neighbourhood: |r_ij| {'<=' if m['paper_inclusive'] else '<'} radius "
+              f"(paper's choice); state: {', '.join(m['state'])}")
     if "topological" in kinds:
         print(f"  neighbours.kind: {', '.join(kinds)} (topological: the k nearest)"
               + (f"; {m['neighbours_note']}" if m.get("neighbours_note") else ""))
-    else:
+    elif kinds:
         print("  neighbours.kind: metric only (topological is refused: not yet for this "
               "model)")
     if m.get("derived_arrays"):
