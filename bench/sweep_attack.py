@@ -19,8 +19,10 @@ import contextlib
 import json
 import os
 import resource
+import signal
 import socket
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -159,6 +161,8 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=90.0)
     ap.add_argument("--hold", type=int, default=300)
     args = ap.parse_args()
+    # A `timeout` (SIGTERM) still stops the server and its worker (the finally below).
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (min(hard, max(soft, args.hold + 256)), hard))
     env = {"FLOCKLAB_WARMUP_PRESET": "", "FLOCKLAB_THREADS_PER_WORKER": "1",
@@ -167,17 +171,17 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as d:
         server = ServerProcess(Path(d) / "data", env=env, log_level="warning").start()
         try:
-            out = {"many_axes": many_axes(server),
-                   "healthz_while_one_client_holds_its_cap": hold_connections(server,
-                                                                                args.hold),
-                   "max_size_sweep": run_max_sweep(server, args.seconds)}
+            for name, part in (("many_axes", lambda: many_axes(server)),
+                               ("healthz_while_one_client_holds_its_cap",
+                                lambda: hold_connections(server, args.hold)),
+                               ("max_size_sweep", lambda: run_max_sweep(server, args.seconds))):
+                print(json.dumps({name: part()}), flush=True)
         finally:
             workers = server.children()
             server.stop()
             for pid in workers:
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(pid, 9)
-    print(json.dumps(out, indent=1))
 
 
 if __name__ == "__main__":
