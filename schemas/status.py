@@ -102,6 +102,10 @@ class SweepStatus(BaseModel):
         "deleted after the TTL.")
     results_expire_at: dt.datetime | None
     checksums: dict[str, str] | None = Field(description="sha256 (hex) of each result file.")
+    resumed_runs: dict[str, int] | None = Field(
+        default=None, description="The runs the latest attempt continued from their "
+        "checkpoints (runs with `recording.checkpoint_every`, partially run by a lost "
+        "attempt): run index -> the checkpoint's step; null when none (docs/CHECKPOINTS.md).")
     links: dict[str, str]
 
 

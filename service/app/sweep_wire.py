@@ -78,6 +78,7 @@ def sweep_view(job: Job, ttl_seconds: float) -> SweepStatus:
         results_expire_at=_ts(job.finished_at + ttl_seconds)
         if results == "available" and job.finished_at else None,
         checksums=_checksums(job) if results == "available" else None,
+        resumed_runs=json.loads(job.resumed_runs) if job.resumed_runs else None,
         links=links,
     )
 

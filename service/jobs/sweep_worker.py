@@ -2,7 +2,9 @@
 
 The sweep runs with `service.sweeps.runner.run_sweep` into the attempt's folder, which
 the supervisor gave this attempt from a lost predecessor when there was one: the runner
-skips the runs already finished there, so a retry continues instead of starting over.
+skips the runs already finished there, so a retry continues instead of starting over,
+and continues a checkpointed run from its checkpoint, which it reports to the supervisor
+as ("run_resumed", token, run, step | None).
 """
 
 from __future__ import annotations
@@ -60,13 +62,18 @@ def run_sweep_order(order: dict[str, Any], conn: Connection,
             conn.send(("progress", token, int(p.runs_done + p.runs_failed),
                        int(p.runs_total), int(p.runs_failed)))
 
+    def on_resumed(run: int, step: int | None) -> None:
+        with contextlib.suppress(OSError):
+            conn.send(("run_resumed", token, run, step))
+
     from flocklab.service.sweeps.factory import make_executor
     from flocklab.service.sweeps.ray_executor import ClusterError
 
     out_dir = Path(order["out_dir"])
     try:
         outcome = run_sweep(sweep, out_dir, on_progress=on_progress, should_stop=should_stop,
-                            executor=make_executor(order.get("executor")))
+                            executor=make_executor(order.get("executor")),
+                            on_resumed=on_resumed)
     except BackendUnavailable as exc:
         return {"problem": problem("backend-unavailable", "Backend unavailable", 503,
                                    str(exc))}

@@ -35,6 +35,7 @@ from flocklab.schemas.sweep import SweepRun
 
 from . import ray_tasks
 from .executors import BATCH_RUNS, ExecutorConfig, ResultFn, StopFn
+from .run_checkpoints import ResumedFn
 
 if TYPE_CHECKING:
     from flocklab.kernels import RunResult
@@ -171,7 +172,11 @@ class RayExecutor:
     # -- the Executor protocol ------------------------------------------------------------
 
     def run_sweep_runs(self, runs: Sequence[SweepRun], keep: str, out_dir: Path,
-                       on_result: ResultFn, should_stop: StopFn) -> None:
+                       on_result: ResultFn, should_stop: StopFn,
+                       on_resumed: ResumedFn | None = None) -> None:
+        """A task cannot call back before it ends: a run that went on from its checkpoint
+        says so in its result's extra (`resumed_from_step`), which the runner reports
+        (`on_resumed` is not called here)."""
         if not runs:
             return
         task = self._task(ray_tasks.run_chunk)
