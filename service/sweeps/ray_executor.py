@@ -6,6 +6,8 @@ a chunk of consecutive runs through `kernels.run_batch`, so the per-task overhea
 shared by many runs and replicas still fuse into one launch; results (observables, never
 frames) come back through Ray's object store and are recorded here, by the caller, so the
 journal and tables are written by one process only, exactly as with the local executor.
+Runs with checkpoints run one by one in their task, each checkpointing under the sweep's
+folder (run_checkpoints.py), so a task Ray retries goes on with them from there.
 
 Failure handling:
 - A task whose worker process or node dies is retried once by Ray (`max_retries=1`; on

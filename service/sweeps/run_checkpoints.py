@@ -6,8 +6,9 @@ a fused batch: the engine checkpoints one replica at a time, and a run alone has
 bits it has in any batch (kernels.run_batch). Its checkpoint (service/checkpoints.py)
 lies in its own folder while it goes on:
   keep = summaries  runs/<i>/checkpoint.npz (the state and its fingerprint, no frames)
-                    and runs/<i>/.run.lock; both removed once the run's journal line is
-                    written (`drop_checkpoint`), beside the summary.json that follows
+  or table          and runs/<i>/.run.lock; both removed once the run's journal line is
+                    written (`drop_checkpoint`), beside its summary.json (keep = table:
+                    with the folder)
   keep = all        the run's hidden folder runs/.<i>.partial-* (with its frames), as
                     `flocklab run --out runs/<i>` keeps it (service/execute.py)
 Running the sweep again into its folder (the CLI's rerun, a service attempt after a
@@ -25,6 +26,7 @@ import the engine.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import shutil
 import time
@@ -74,10 +76,14 @@ def run_alone(run: SweepRun, keep: str, out_dir: Path, should_stop: StopFn | Non
 
 
 def drop_checkpoint(out_dir: Path, index: int) -> None:
-    """A keep = summaries run's checkpoint, once its journal line is written."""
+    """A keep = summaries (or table) run's checkpoint, once its journal line is
+    written; with keep = table its emptied folder too."""
     folder = run_folder(out_dir, index)
     for name in (CHECKPOINT, LOCK):
         (folder / name).unlink(missing_ok=True)
+    for empty in (folder, folder.parent):
+        with contextlib.suppress(OSError):  # not empty (summary.json), or absent
+            empty.rmdir()
 
 
 def _summaries_only(run: SweepRun, out_dir: Path, should_stop: StopFn | None,

@@ -192,7 +192,7 @@ class _State:
             atomic_write(folder / "summary.json",
                          json.dumps(summary, indent=2, allow_nan=False), durable=False)
         journal.append(record)
-        if wants_checkpoints(run) and self.sweep.keep == "summaries":
+        if wants_checkpoints(run) and self.sweep.keep != "all":
             drop_checkpoint(self.out_dir, run.index)
         self.records[run.index] = record
         self.progress()

@@ -82,7 +82,7 @@ def stopped_at_first_checkpoint(out: Path, data: dict[str, Any]) -> None:
     assert outcome.status == "cancelled" and outcome.runs_done == 0
 
 
-@pytest.mark.parametrize("keep", ["summaries", "all"])
+@pytest.mark.parametrize("keep", ["table", "summaries", "all"])
 def test_a_stopped_sweep_goes_on_from_its_runs_checkpoint(tmp_path, keep):
     data = spec(keep=keep)
     ref = reference(tmp_path, data)
@@ -93,6 +93,10 @@ def test_a_stopped_sweep_goes_on_from_its_runs_checkpoint(tmp_path, keep):
                         on_resumed=lambda run, step: told.append((run, step)))
     assert outcome.status == "completed" and outcome.runs_done == 2
     assert told == [(0, EVERY)] and outcome.checkpoints_resumed == {0: EVERY}
+    if keep == "table":  # nothing of the runs is kept but their rows
+        assert not (out / "runs").exists()
+        assert_same_tables(ref, out, keep)
+        return
     summary = json.loads((out / "runs" / "0" / "summary.json").read_text())
     assert summary["resumed_from_step"] == EVERY and summary["steps"] == 600
     assert "resumed_from_step" not in json.loads(
@@ -121,7 +125,7 @@ def test_a_damaged_run_checkpoint_is_refused_and_the_run_redone(tmp_path):
 
 def test_the_sweep_without_checkpoints_has_the_same_tables(tmp_path):
     """Checkpoints (each run alone, windows cut at every k-th step) change no bit: the
-    tables equal those of the sweep whose runs fuse into one batch, unchekpointed."""
+    tables equal those of the sweep whose runs fuse into one batch, uncheckpointed."""
     data = spec()
     ref = reference(tmp_path, data)
     plain = spec(every=0)
@@ -242,15 +246,20 @@ def test_a_service_sweep_whose_worker_is_killed_resumes_its_run_from_its_checkpo
 
 
 @pytest.mark.slow
-def test_a_service_sweep_of_a_killed_api_resumes_its_run_after_restart(make_server, tmp_path):
+@pytest.mark.parametrize("graceful", [False, True], ids=["kill-9", "sigterm"])
+def test_a_service_sweep_of_a_stopped_api_resumes_its_run_after_restart(
+        make_server, tmp_path, graceful):
     ref = reference(tmp_path, LONG)
     data = tmp_path / "data"
     s1 = make_server(env=SERVICE_ENV, data_dir=data)
     with httpx.Client(base_url=s1.url, timeout=30) as http:
         created = submit(http, LONG)
         _wait_checkpoint(data / "results" / ".attempts", random.Random(3))
-    s1.kill()  # kill -9 the API; its orphaned worker stops at its next window
+    if graceful:
+        s1.stop()  # SIGTERM: the sweep is re-queued, its attempt not counted
+    else:
+        s1.kill()  # kill -9 the API; its orphaned worker stops at its next window
     s2 = make_server(env=SERVICE_ENV, data_dir=data)
     with httpx.Client(base_url=s2.url, timeout=30) as http:
         done = wait_sweep(http, created["id"], timeout=240)
-        _assert_service_sweep(http, done, ref, data)
+        _assert_service_sweep(http, done, ref, data, attempts=1 if graceful else 2)
