@@ -140,10 +140,11 @@ def test_the_sweep_without_checkpoints_has_the_same_tables(tmp_path):
 # Two runs of N = 2000 for 3000 steps (about 10 s each on one thread), a checkpoint every
 # 200 steps.
 LONG = spec(n=2000, steps=3000, etas=(0.5, 2.5))
+LONG_ALL = spec(n=2000, steps=3000, etas=(0.5, 2.5), keep="all")
 
 
 def _checkpoints(root: Path) -> list[Path]:
-    return [*root.glob("**/runs/*/" + CHECKPOINT)]
+    return [*root.glob("**/runs/*/" + CHECKPOINT), *root.glob("**/runs/.*/" + CHECKPOINT)]
 
 
 def _wait_checkpoint(root: Path, rng: random.Random, proc: Any = None) -> None:
@@ -164,7 +165,6 @@ def test_flocklab_sweep_killed_mid_run_resumes_from_its_checkpoint(tmp_path):
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "flocklab", "sweep", str(path), "--out", str(out)]
     rng = random.Random(4)
-    resumed: dict[str, int] = {}
     for _ in range(2):  # killed in the middle of a run, twice
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         before = {p: p.stat().st_mtime_ns for p in _checkpoints(out)}
@@ -204,7 +204,7 @@ def _events(http: httpx.Client, sweep_id: str) -> list[dict]:
 
 
 def _assert_service_sweep(http: httpx.Client, done: dict, ref: Path, data: Path,
-                          attempts: int = 2) -> dict[str, int]:
+                          attempts: int = 2, keep: str = "summaries") -> dict[str, int]:
     assert done["status"] == "succeeded" and done["attempts"] == attempts, done
     assert done["runs_done"] == 2 and done["error"] is None
     resumed = done["resumed_runs"]
@@ -217,19 +217,21 @@ def _assert_service_sweep(http: httpx.Client, done: dict, ref: Path, data: Path,
     folder = data / "results" / done["id"]
     summary = json.loads((folder / "runs" / run / "summary.json").read_text())
     assert summary["resumed_from_step"] == step
-    assert_same_tables(ref, folder)
+    assert_same_tables(ref, folder, keep)
     assert list((data / "results" / ".attempts").iterdir()) == []
     return resumed
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("keep", ["summaries", "all"])
 def test_a_service_sweep_whose_worker_is_killed_resumes_its_run_from_its_checkpoint(
-        make_server, tmp_path):
-    ref = reference(tmp_path, LONG)
+        make_server, tmp_path, keep):
+    sweep = LONG_ALL if keep == "all" else LONG
+    ref = reference(tmp_path, sweep)
     data = tmp_path / "data"
     server = make_server(env=SERVICE_ENV, data_dir=data)
     with httpx.Client(base_url=server.url, timeout=30) as http:
-        created = submit(http, LONG)
+        created = submit(http, sweep)
         _wait_checkpoint(data / "results" / ".attempts", random.Random(2))
         running = http.get(f"/v1/sweeps/{created['id']}").json()
         assert running["status"] == "running" and running["resumed_runs"] is None
@@ -237,7 +239,7 @@ def test_a_service_sweep_whose_worker_is_killed_resumes_its_run_from_its_checkpo
         os.kill(worker, signal.SIGKILL)
         events = _events(http, created["id"])
         done = wait_sweep(http, created["id"], timeout=180)
-        resumed = _assert_service_sweep(http, done, ref, data)
+        resumed = _assert_service_sweep(http, done, ref, data, keep=keep)
     # The events show the second attempt continuing the run from its checkpoint, before
     # that run ended.
     told = [e for e in events if e["resumed_runs"]]
