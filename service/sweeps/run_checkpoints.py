@@ -72,7 +72,7 @@ def run_alone(run: SweepRun, keep: str, out_dir: Path, should_stop: StopFn | Non
     told = on_resumed or (lambda run, step, why: None)
     if keep == "all":
         return _with_artifacts(run, out_dir, should_stop, told)
-    return _summaries_only(run, out_dir, should_stop, told)
+    return _without_frames(run, out_dir, should_stop, told)
 
 
 def drop_checkpoint(out_dir: Path, index: int) -> None:
@@ -86,7 +86,7 @@ def drop_checkpoint(out_dir: Path, index: int) -> None:
             empty.rmdir()
 
 
-def _summaries_only(run: SweepRun, out_dir: Path, should_stop: StopFn | None,
+def _without_frames(run: SweepRun, out_dir: Path, should_stop: StopFn | None,
                     told: ResumedFn) -> RunResult | None:
     from flocklab import kernels
     from flocklab.kernels.checkpoint import BACKEND, PATH, STEP, CheckpointMismatch
