@@ -399,7 +399,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "running it again resumes")
     p.add_argument("sweep", help="sweep JSON file, '-' for stdin, or preset:NAME")
     p.add_argument("--out", required=True, help="output folder (resumed if it holds this "
-                   "sweep)")
+                   "sweep: its finished runs kept, a run with checkpoints continued from "
+                   "its latest)")
     p.add_argument("--overwrite", action="store_true",
                    help="discard a sweep folder's finished runs and start afresh")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
