@@ -82,7 +82,11 @@ class _Run:
                 if str(resume[key]) != now:
                     raise CheckpointMismatch(f"the checkpoint ran on {key.split('/')[1]} "
                                              f"{str(resume[key])!r}, this run on {now!r}")
-            self.batch.load(resume)
+            try:
+                self.batch.load(resume)
+            except KeyError as exc:  # another model's or schedule's arrays
+                raise CheckpointMismatch(f"the checkpoint has no array {exc} of this "
+                                         f"{scenarios[0].model.kind} run") from None
             self.start = int(resume[STEP])
         self.setup = time.perf_counter() - self.t0
         self.scenarios, self.sinks, self.path, self.backend = scenarios, sinks, path, backend

@@ -120,7 +120,7 @@ class SweepStatus(LifecycleView):
     wire_order = ("id", "name", "status", "progress", "runs_done", "runs_failed", "runs_total",
                   "model", "created_at", "started_at", "finished_at", "attempts",
                   "cancel_requested", "timeout_seconds", "error", "results",
-                  "results_expire_at", "checksums", "links")
+                  "results_expire_at", "checksums", "resumed_runs", "links")
 
     id: str = Field(description="The sweep's id (a UUID).")
     name: str | None = Field(default=None, description="The sweep's `name`.")
@@ -144,6 +144,10 @@ class SweepStatus(LifecycleView):
         description="available: table, runs and series can be fetched (also after a "
         "cancel: the runs finished before it); none: ended without results; expired: "
         "deleted after the TTL.")
+    resumed_runs: dict[str, int] | None = Field(
+        default=None, description="The runs the latest attempt continued from their "
+        "checkpoints (runs with `recording.checkpoint_every`, partially run by a lost "
+        "attempt): run index -> the checkpoint's step; null when none (docs/CHECKPOINTS.md).")
 
 
 class SweepList(BaseModel):

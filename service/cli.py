@@ -214,7 +214,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                 kind=args.executor, ray_address=args.ray_address, threads=args.ray_threads))
             outcome = run_sweep(sweep, out, should_stop=stop, executor=executor,
                                 on_progress=lambda p: bar(p.runs_done + p.runs_failed,
-                                                          p.runs_total))
+                                                          p.runs_total),
+                                on_resumed=None if args.quiet else _say_resumed)
     except SweepFolderConflict as exc:
         raise BadInput(f"{exc}, or pass --overwrite to start it afresh") from exc
     except SweepError as exc:
@@ -227,6 +228,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     print(json.dumps({"out": str(out), "status": outcome.status,
                       "runs_done": outcome.runs_done, "runs_failed": outcome.runs_failed,
                       "runs_total": outcome.runs_total, "runs_resumed": outcome.runs_resumed,
+                      **({"checkpoints_resumed": {str(k): v for k, v in
+                                                  outcome.checkpoints_resumed.items()}}
+                         if outcome.checkpoints_resumed else {}),
                       "wall_seconds": round(time.perf_counter() - t0, 3)}))
     finished = outcome.runs_done + outcome.runs_failed
     if outcome.status == "cancelled":
@@ -237,6 +241,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"flocklab: {outcome.runs_failed} run(s) diverged (status in runs.csv; left "
               "out of table.csv)", file=sys.stderr)
     return EXIT_OK
+
+
+def _say_resumed(run: int, step: int | None) -> None:
+    """A sweep run going on from its checkpoint (docs/CHECKPOINTS.md), on stderr."""
+    if step is not None:
+        print(f"flocklab: run {run} goes on from its checkpoint at step {step}",
+              file=sys.stderr)
 
 
 class _StopOnInterrupt:
@@ -388,7 +399,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "running it again resumes")
     p.add_argument("sweep", help="sweep JSON file, '-' for stdin, or preset:NAME")
     p.add_argument("--out", required=True, help="output folder (resumed if it holds this "
-                   "sweep)")
+                   "sweep: its finished runs kept, a run with checkpoints continued from "
+                   "its latest)")
     p.add_argument("--overwrite", action="store_true",
                    help="discard a sweep folder's finished runs and start afresh")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -69,7 +69,8 @@ def sweep_view(job: Job, ttl_seconds: float) -> SweepStatus:
                        progress=min(1.0, ended / total) if total else 0.0,
                        name=name if isinstance(name, str) else None,
                        runs_done=max(0, ended - job.runs_failed), runs_failed=job.runs_failed,
-                       runs_total=total)
+                       runs_total=total,
+                       resumed_runs=json.loads(job.resumed_runs) if job.resumed_runs else None)
 
 
 VIEWS: dict[str, Callable[[Job, float], LifecycleView]] = {"job": job_view,

@@ -90,12 +90,14 @@ def run_sweep(sweep: Sweep, attempt: Attempt) -> dict[str, Any]:
     """One sweep attempt, with `service.sweeps.runner.run_sweep` into the attempt's
     folder, which the supervisor gave it from a lost predecessor when there was one: the
     runner skips the runs already finished there, so a retry continues instead of
-    starting over. Progress is (runs ended, runs in all, runs failed)."""
+    starting over, and continues a checkpointed run from its checkpoint, which it reports
+    to the supervisor as ("run_resumed", token, run, step | None). Progress is (runs
+    ended, runs in all, runs failed)."""
     from flocklab.service.sweeps.runner import run_sweep as run
 
     if attempt.order.get("threads"):
-        # Thread count = the CPUs this worker is allotted (R13); a run's own `threads`
-        # still wins, since the engine reads this only when the scenario names none.
+        # Thread count = the CPUs this worker is allotted (R13); the executors cap a
+        # run's own `threads` at it too.
         os.environ["FLOCKLAB_THREADS"] = str(attempt.order["threads"])
 
     def on_progress(p: Any) -> None:
@@ -103,8 +105,12 @@ def run_sweep(sweep: Sweep, attempt: Attempt) -> dict[str, Any]:
         attempt.send("progress", int(p.runs_done + p.runs_failed), int(p.runs_total),
                      int(p.runs_failed))
 
+    def on_resumed(run_index: int, step: int | None) -> None:
+        attempt.send("run_resumed", run_index, step)
+
     outcome = run(sweep, attempt.out_dir, on_progress=on_progress,
-                  should_stop=attempt.should_stop, executor=attempt.executor())
+                  should_stop=attempt.should_stop, executor=attempt.executor(),
+                  on_resumed=on_resumed)
     summary = {"status": outcome.status, "runs_done": outcome.runs_done,
                "runs_failed": outcome.runs_failed, "runs_total": outcome.runs_total,
                "runs_ended": outcome.runs_done + outcome.runs_failed,

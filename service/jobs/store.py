@@ -64,10 +64,13 @@ CREATE INDEX IF NOT EXISTS jobs_by_status ON jobs (status, seq);
 #   runs_failed  a sweep's runs that ended without measures so far (diverged)
 #   resumed_from_step  the checkpoint's step the latest attempt went on from (a job whose
 #                worker was lost; NULL: it ran from step 0)
+#   resumed_runs a sweep's runs the latest attempt continued from their checkpoints: a
+#                JSON object, run index -> the checkpoint's step (NULL: none)
 _ADDED_COLUMNS = {
     "kind": "TEXT NOT NULL DEFAULT 'job'",
     "runs_failed": "INTEGER NOT NULL DEFAULT 0",
     "resumed_from_step": "INTEGER",
+    "resumed_runs": "TEXT",
 }
 
 
@@ -118,6 +121,7 @@ class Job:
     kind: str = "job"
     runs_failed: int = 0
     resumed_from_step: int | None = None
+    resumed_runs: str | None = None
 
     @property
     def terminal(self) -> bool:
@@ -272,7 +276,7 @@ class JobStore:
             db.execute(
                 "UPDATE jobs SET status = 'running', attempts = attempts + 1,"
                 " lease_owner = ?, lease_token = ?, lease_expires = ?,"
-                " started_at = ?, steps_done = 0, resumed_from_step = NULL"
+                " started_at = ?, steps_done = 0, resumed_from_step = NULL, resumed_runs = NULL"
                 " WHERE id = ? AND status = 'queued'",
                 (owner, uuid.uuid4().hex, now + lease_seconds, now, row["id"]),
             )
@@ -309,6 +313,22 @@ class JobStore:
                 " WHERE id = ? AND status = 'running' AND lease_token = ?",
                 (step, step, job_id, token),
             )
+
+    def set_run_resumed(self, job_id: str, token: str, run: int, step: int | None) -> None:
+        """Record that the running attempt of a sweep continues its run `run` from the
+        run's checkpoint at `step` (None: refused after all, the run starts over)."""
+        with self._tx() as db:
+            row = db.execute("SELECT resumed_runs FROM jobs WHERE id = ? AND status = "
+                             "'running' AND lease_token = ?", (job_id, token)).fetchone()
+            if row is None:
+                return
+            runs = json.loads(row["resumed_runs"] or "{}")
+            if step is None:
+                runs.pop(str(run), None)
+            else:
+                runs[str(run)] = step
+            db.execute("UPDATE jobs SET resumed_runs = ? WHERE id = ? AND lease_token = ?",
+                       (json.dumps(runs, sort_keys=True) if runs else None, job_id, token))
 
     def finish(
         self,

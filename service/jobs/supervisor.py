@@ -7,7 +7,9 @@ heartbeat for itself), enforces cancellation and per-job timeouts from outside t
 died (once: infrastructure failures only, R9) and reaps jobs whose lease expired (R2).
 A re-queued job whose run left a checkpoint (docs/CHECKPOINTS.md) goes on from it: the
 next attempt takes over the lost one's folder and the worker reports the step it resumed
-from (`resumed_from_step`). Every transition goes through the store's conditional UPDATEs.
+from (`resumed_from_step`); a sweep's attempt takes over the whole sweep folder, and its
+worker reports each run it continues from that run's checkpoint (`resumed_runs`). Every
+transition goes through the store's conditional UPDATEs.
 
 All state below is touched only by the supervisor thread; the API talks to it through
 `wake()` and `cancel()`, which are thread-safe.
@@ -256,6 +258,14 @@ class Supervisor:
             self.store.set_resumed(a.job_id, a.token, msg[2])
             if msg[2] is not None:
                 log.info("job %s: resumed from its checkpoint at step %d", a.job_id, msg[2])
+            self.on_change(a.job_id)
+        elif kind == "run_resumed" and w.attempt and msg[1] == w.attempt.token:
+            # A sweep's run going on from its checkpoint (msg[3] None: refused, step 0).
+            a = w.attempt
+            self.store.set_run_resumed(a.job_id, a.token, msg[2], msg[3])
+            if msg[3] is not None:
+                log.info("sweep %s: run %d resumed from its checkpoint at step %d",
+                         a.job_id, msg[2], msg[3])
             self.on_change(a.job_id)
         elif kind == "result" and w.attempt and msg[1] == w.attempt.token:
             outcome = msg[2]

@@ -31,6 +31,7 @@ from flocklab.schemas import Scenario
 from flocklab.schemas.sweep import SweepRun
 
 from ..execute import execute_to_dir
+from .run_checkpoints import ResumedFn, run_checkpointed
 
 if TYPE_CHECKING:
     from flocklab.kernels import RunResult
@@ -64,8 +65,11 @@ class Executor(Protocol):
     """What the sweep runner (and the service's job worker) needs from an executor."""
 
     def run_sweep_runs(self, runs: Sequence[SweepRun], keep: str, out_dir: Path,
-                       on_result: ResultFn, should_stop: StopFn) -> None:
-        """Run `runs`; `keep` = "all" writes each run's artifacts into out_dir/runs/<i>."""
+                       on_result: ResultFn, should_stop: StopFn,
+                       on_resumed: ResumedFn | None = None) -> None:
+        """Run `runs`; `keep` = "all" writes each run's artifacts into out_dir/runs/<i>.
+        Runs with checkpoints go on from theirs (run_checkpoints.py), said through
+        `on_resumed` where the executor can (else in the result's extra)."""
 
     def probe(self, scenario: Scenario) -> RunResult:
         """Run a (tiny) scenario and return its result: which observables a model has."""
@@ -96,8 +100,12 @@ class LocalExecutor:
     """Runs everything in this process, through the engine."""
 
     def run_sweep_runs(self, runs: Sequence[SweepRun], keep: str, out_dir: Path,
-                       on_result: ResultFn, should_stop: StopFn) -> None:
+                       on_result: ResultFn, should_stop: StopFn,
+                       on_resumed: ResumedFn | None = None) -> None:
         allowed = allotted_threads()
+        # Checkpointed runs go alone (run_checkpoints.py), with their threads capped too.
+        runs = run_checkpointed([fit_threads(r, allowed) for r in runs], keep, out_dir,
+                                on_result, should_stop, on_resumed)
         if keep == "all":
             self._with_artifacts(runs, allowed, out_dir, on_result, should_stop)
             return

@@ -6,6 +6,8 @@ a chunk of consecutive runs through `kernels.run_batch`, so the per-task overhea
 shared by many runs and replicas still fuse into one launch; results (observables, never
 frames) come back through Ray's object store and are recorded here, by the caller, so the
 journal and tables are written by one process only, exactly as with the local executor.
+Runs with checkpoints run one by one in their task, each checkpointing under the sweep's
+folder (run_checkpoints.py), so a task Ray retries goes on with them from there.
 
 Failure handling:
 - A task whose worker process or node dies is retried once by Ray (`max_retries=1`; on
@@ -35,6 +37,7 @@ from flocklab.schemas.sweep import SweepRun
 
 from . import ray_tasks
 from .executors import BATCH_RUNS, ExecutorConfig, ResultFn, StopFn
+from .run_checkpoints import ResumedFn
 
 if TYPE_CHECKING:
     from flocklab.kernels import RunResult
@@ -171,7 +174,11 @@ class RayExecutor:
     # -- the Executor protocol ------------------------------------------------------------
 
     def run_sweep_runs(self, runs: Sequence[SweepRun], keep: str, out_dir: Path,
-                       on_result: ResultFn, should_stop: StopFn) -> None:
+                       on_result: ResultFn, should_stop: StopFn,
+                       on_resumed: ResumedFn | None = None) -> None:
+        """A task cannot call back before it ends: a run that went on from its checkpoint
+        says so in its result's extra (`resumed_from_step`), which the runner reports
+        (`on_resumed` is not called here)."""
         if not runs:
             return
         task = self._task(ray_tasks.run_chunk)

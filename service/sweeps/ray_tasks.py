@@ -30,21 +30,35 @@ def run_chunk(runs: list[SweepRun], keep: str, out_dir: str, threads: int
               ) -> list[tuple[int, RunResult]]:
     """Run consecutive sweep runs through `kernels.run_batch` (one fused launch where the
     engine can), or, for keep = all, one by one into out_dir/runs/<i> (a path every node
-    can write). Returns (position in `runs`, result) for each finished run."""
+    can write); runs with checkpoints one by one, each on from its checkpoint under
+    out_dir/runs (run_checkpoints.py: out_dir must then be a path every node can write,
+    whatever `keep`), so a task Ray retries after a lost worker goes on from there.
+    Returns (position in `runs`, result) for each finished run."""
     _use_threads(threads)
+    from .run_checkpoints import run_alone, wants_checkpoints
+
+    done = []
+    rest = []
+    for i, run in enumerate(runs):
+        if not wants_checkpoints(run):
+            rest.append(i)
+            continue
+        result = run_alone(run, keep, Path(out_dir), None)
+        if result is not None:
+            done.append((i, result))
     if keep == "all":
         from .executors import run_with_artifacts
 
-        done = []
-        for i, run in enumerate(runs):
-            result = run_with_artifacts(run, Path(out_dir), None)
+        for i in rest:
+            result = run_with_artifacts(runs[i], Path(out_dir), None)
             if result is not None:
                 done.append((i, result))
         return done
     from flocklab import kernels
 
-    results = kernels.run_batch([r.scenario for r in runs])
-    return [(i, r) for i, r in enumerate(results) if r.status != "cancelled"]
+    results = kernels.run_batch([runs[i].scenario for i in rest]) if rest else []
+    return done + [(i, r) for i, r in zip(rest, results, strict=True)
+                   if r.status != "cancelled"]
 
 
 def probe(scenario: Scenario, threads: int) -> RunResult:

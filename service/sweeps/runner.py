@@ -11,7 +11,10 @@ The folder:
                       summaries it holds the run's measures (its runs.csv columns)
   runs/<index>/{scenario.json, observables.csv, trajectory.h5}   keep = all
 Running the same sweep into the same folder again resumes it: runs found in the journal
-are not redone. A folder holding a different sweep is refused (SweepFolderConflict).
+are not redone, and a run with checkpoints (`recording.checkpoint_every`) goes on from
+its latest one in its run folder (run_checkpoints.py), to the bits of the sweep never
+interrupted; `on_resumed(run, step)` says so. A folder holding a different sweep is
+refused (SweepFolderConflict).
 
 The runs execute through an executor (executors.py): by default in this process, through
 `kernels.run_batch` (BATCH_RUNS consecutive runs at a time, so memory stays bounded however
@@ -28,7 +31,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -42,6 +45,7 @@ from ..execute import run_summary
 from .executors import Executor, LocalExecutor
 from .journal import Journal, read_journal
 from .measures import reduce_run
+from .run_checkpoints import drop_checkpoint, wants_checkpoints
 from .sensitivity import write_sensitivity
 from .tables import SWEEP_FILE, atomic_write, axis_columns, write_tables
 
@@ -73,6 +77,8 @@ class SweepOutcome:
     runs_total: int
     out_dir: Path
     runs_resumed: int = 0
+    # runs that went on from their checkpoint: run index -> the checkpoint's step
+    checkpoints_resumed: dict[int, int] = field(default_factory=dict)
 
 
 class SweepFolderConflict(FileExistsError):
@@ -86,9 +92,12 @@ def run_sweep(
     on_progress: Callable[[SweepProgress], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
     executor: Executor | None = None,
+    on_resumed: Callable[[int, int | None], None] | None = None,
 ) -> SweepOutcome:
     """Run every run of `sweep` not yet finished in `out_dir`, writing the tables; the
-    runs execute through `executor` (default: in this process).
+    runs execute through `executor` (default: in this process). `on_resumed(run, step)`:
+    run `run` goes on from its checkpoint at `step` (None: its checkpoint was refused
+    after all, it runs from step 0).
 
     Raises SweepError (before any run) for an invalid sweep or an observable the model
     does not have, SweepFolderConflict for a folder holding something else; engine errors
@@ -106,8 +115,11 @@ def run_sweep(
         _check_observables(sweep, pending[0], executor)
     if not resuming:
         _create_folder(out_dir, sweep, runs)
-    state = _State(sweep, runs, out_dir, records, on_progress)
+    state = _State(sweep, runs, out_dir, records, on_progress, on_resumed)
     state.progress()
+    for i in records:  # a kill between a run's journal line and the end of its checkpoint
+        if wants_checkpoints(runs[i]):
+            drop_checkpoint(out_dir, i)
 
     def stop() -> bool:
         return should_stop is not None and should_stop()
@@ -115,7 +127,8 @@ def run_sweep(
     journal = Journal(out_dir)
     try:
         executor.run_sweep_runs(pending, sweep.keep, out_dir,
-                                lambda run, result: state.finish(run, result, journal), stop)
+                                lambda run, result: state.finish(run, result, journal), stop,
+                                on_resumed=state.resumed_run)
     finally:
         journal.close()
         state.write_tables()
@@ -123,7 +136,8 @@ def run_sweep(
     status = "completed" if len(records) == len(runs) else "cancelled"
     if status == "completed" and sweep.analysis is not None:
         write_sensitivity(out_dir, sweep)
-    return SweepOutcome(status, done, failed, len(runs), out_dir, resumed)
+    return SweepOutcome(status, done, failed, len(runs), out_dir, resumed,
+                        dict(state.resumed))
 
 
 class _State:
@@ -131,13 +145,16 @@ class _State:
 
     def __init__(self, sweep: Sweep, runs: list[SweepRun], out_dir: Path,
                  records: dict[int, dict[str, Any]],
-                 on_progress: Callable[[SweepProgress], None] | None):
+                 on_progress: Callable[[SweepProgress], None] | None,
+                 on_resumed: Callable[[int, int | None], None] | None = None):
         self.sweep, self.runs, self.out_dir = sweep, runs, out_dir
         self.records = records
         # Kept as runs finish: recounting the records per finished run was quadratic
         # (a 10^5-run sweep slowed from ~230 to ~60 runs/s by its 40,000th run).
         self.failed = sum(1 for r in records.values() if r["status"] != "completed")
         self.on_progress = on_progress
+        self.on_resumed = on_resumed
+        self.resumed: dict[int, int] = {}  # run -> the checkpoint's step it went on from
         self.last_tables = time.monotonic()
         self.table_interval = TABLE_INTERVAL
 
@@ -149,9 +166,22 @@ class _State:
             done, failed = self.counts()
             self.on_progress(SweepProgress(done, failed, len(self.runs)))
 
+    def resumed_run(self, run: SweepRun, step: int | None, why: str | None = None) -> None:
+        """Run `run` goes on from its checkpoint at `step` (None: refused, from step 0)."""
+        if step is None:
+            self.resumed.pop(run.index, None)
+        else:
+            self.resumed[run.index] = step
+        if self.on_resumed is not None:
+            self.on_resumed(run.index, step)
+
     def finish(self, run: SweepRun, result: RunResult, journal: Journal) -> None:
         """Record one finished run. The journal line goes last: it is the resume state,
-        so a run whose line is missing is redone (and its summary rewritten)."""
+        so a run whose line is missing is redone (and its summary rewritten); then a
+        checkpointed run's checkpoint is dropped."""
+        step = result.extra.get("resumed_from_step")
+        if step is not None and self.resumed.get(run.index) != step:
+            self.resumed_run(run, step)  # told only now (a Ray task's run)
         record = _record(self.sweep, run, result)
         if self.sweep.keep == "summaries":
             summary = run_summary(run.scenario, result, frames=0, files=["summary.json"])
@@ -164,6 +194,8 @@ class _State:
             atomic_write(folder / "summary.json",
                          json.dumps(summary, indent=2, allow_nan=False), durable=False)
         journal.append(record)
+        if wants_checkpoints(run) and self.sweep.keep != "all":
+            drop_checkpoint(self.out_dir, run.index)
         old = self.records.get(run.index)
         self.failed += ((record["status"] != "completed")
                         - (old is not None and old["status"] != "completed"))

@@ -52,6 +52,7 @@ from flocklab.schemas.formation import (
 )
 
 from ... import runtime
+from ...checkpoint import put
 from ...replicas import FusedBatch, Snapshots
 from ...space.cells import SPREAD
 from ...space.grid import row as row_of
@@ -296,8 +297,35 @@ class FormationBatch(FusedBatch):
         self.splines = [b for b, sc in enumerate(scenarios)
                         if isinstance(sc.model.path, SplinePath)]
         self.tables = {b: SplineTable(self.paths[b]) for b in self.splines}
+        self.tables_dev: dict[str, ti.Ndarray] = {}  # the spline tables' device copies
         self.last_p: dict[int, tuple[int, np.ndarray]] = {}  # b: (h, p) of the last row
         self.now = np.zeros(B, dtype=np.int64)  # each replica's current step
+
+    # Checkpoints: `args` holds the kernel's whole state (positions, counters, observation
+    # rows, scratch); the host keeps each replica's current step, its last step (end_at),
+    # the last spline row and 3D F2's D3 rows, all saved here.
+    CHECKPOINTS = True
+
+    def save_host(self) -> dict[str, np.ndarray]:
+        out = {"host/now": self.now.copy(), "host/steps": np.asarray(self.steps).copy()}
+        for b, (h, p) in self.last_p.items():
+            out[f"host/last_p/{b}"] = np.array([h, *p], np.float64)
+        for b, rows in enumerate(self.d3):
+            if self.snap[b]:
+                out[f"host/d3/{b}"] = rows.copy()
+        return out
+
+    def load_host(self, state) -> None:
+        self.now = state["host/now"].copy()
+        self.steps = state["host/steps"].copy()
+        self.last_p = {}
+        for key in state:
+            if key.startswith("host/last_p/"):
+                row = state[key]
+                self.last_p[int(key.rsplit("/", 1)[1])] = (int(row[0]), row[1:].copy())
+        for b in range(len(self.scenarios)):
+            if self.snap[b]:
+                put(self.d3[b], f"host/d3/{b}", state[f"host/d3/{b}"])
 
     def _snapshots(self, ns: list[int], rows: list[int]) -> np.ndarray:
         """The snapshot buffer of 3D F2's D3 (`Snapshots`); each replica's first slot."""
@@ -346,10 +374,11 @@ class FormationBatch(FusedBatch):
 
     def _device(self, name: str, a: np.ndarray) -> ti.Ndarray:
         """`a` in a reused device array (windows mostly share one shape; allocating a
-        Taichi ndarray costs more than the copy)."""
-        held = self.args.get(name)
+        Taichi ndarray costs more than the copy). Kept out of `args`: it is rewritten
+        before every read, so a checkpoint need not hold it."""
+        held = self.tables_dev.get(name)
         if held is None or held.shape != a.shape:
-            held = self.args[name] = ti.ndarray(float, shape=a.shape)
+            held = self.tables_dev[name] = ti.ndarray(float, shape=a.shape)
         held.from_numpy(runtime.as_real(a))
         return held
 

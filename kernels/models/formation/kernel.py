@@ -21,6 +21,7 @@ p(t), b_i(t) and the rates are 3-vectors; `leader_z` and `centroid_z` join the o
 The dense regime (dense.py) is 2D: 3D steps are always exact.
 """
 
+from collections.abc import Mapping
 from functools import cache
 from typing import Any
 
@@ -31,6 +32,7 @@ from flocklab.schemas import Scenario
 from flocklab.schemas.formation import FormationParams, SaturatingF
 
 from ... import runtime
+from ...checkpoint import CheckpointMismatch
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
@@ -245,12 +247,7 @@ class FormationKernel(ModelKernel):
             raise ValueError("formation changes closer together than one time step dt")
         for k in used:
             if k not in self.b_held:
-                free = next(j for j in range(2) if self.b_held[j] not in used)
-                self.b_dev[free].from_numpy(as_real(self.schedule.stored[k]))
-                self.b_held[free] = k
-                if runtime.real() is np.float64 and len(self.schedule.stored) <= 2:
-                    # Held for the whole run and exact on the device: no host copy.
-                    self.schedule.release(k, Rows(self.b_dev[free]).take)
+                self._hold(next(j for j in range(2) if self.b_held[j] not in used), k)
         dim = self.dim
         slots, lead = lead_slots(dim)
         for s, (t, w) in enumerate(zip(times, weights, strict=True)):
@@ -261,6 +258,14 @@ class FormationKernel(ModelKernel):
             self.prm_host[o + lead.B00: o + lead.B00 + dim * dim] = mats[1].ravel()
         self.prm.from_numpy(as_real(self.prm_host))
         return any(self.b_held[1] in w for w in weights)
+
+    def _hold(self, j: int, k: int) -> None:
+        """Put stored formation k's offsets into device slot j (the kernels' ba, bb)."""
+        self.b_dev[j].from_numpy(as_real(self.schedule.stored[k]))
+        self.b_held[j] = k
+        if runtime.real() is np.float64 and len(self.schedule.stored) <= 2:
+            # Held for the whole run and exact on the device: no host copy.
+            self.schedule.release(k, Rows(self.b_dev[j]).take)
 
     def _kernels(self, blend: bool, grid: PlaneGrid):
         """(euler, rates, observe) for positions bucketed in `grid` (its layout as built)."""
@@ -522,6 +527,31 @@ class FormationKernel(ModelKernel):
             out["velocity"] = np.empty_like(vel)
             out["velocity"][ids] = vel
         return out
+
+    def save(self) -> dict[str, np.ndarray]:
+        """Checkpoints: the sorted positions with their ids, the step of the state (the
+        frame's), the dense regime's counters, and which stored formation each device
+        slot holds (F1: the slot decides whether a step blends, `_load_times`). The
+        leader's p(t) and the schedule's b_i(t) are functions of t alone; the grids, the
+        union-find forest and the observation arrays are rebuilt at each use."""
+        return {**self.state.save(),
+                "formation/counters": np.array([self.now, self.coarse_steps,
+                                                self.max_reach], np.int64),
+                "formation/held": np.array([-1 if k is None else k for k in self.b_held],
+                                           np.int64)}
+
+    def load(self, state: Mapping[str, np.ndarray]) -> None:
+        """Back from `save`, into a kernel freshly built from the same scenario."""
+        held = [int(k) for k in state["formation/held"]]
+        if len(held) != 2 or any(k >= (len(self.schedule.stored) if self.f1 else 0)
+                                 for k in held):
+            raise CheckpointMismatch(f"formation/held: {held} does not fit this schedule")
+        self.state.load(state)
+        self.now, self.coarse_steps, self.max_reach = (
+            int(v) for v in state["formation/counters"])
+        for j, k in enumerate(held):
+            if k >= 0:
+                self._hold(j, k)
 
     def convergence_keys(self) -> list[str]:
         return ["formation_error", "velocity_mismatch_max"] if self.f1 else [
