@@ -1,5 +1,5 @@
-"""Durability on a real server: kill -9 and restart, killed workers, final states (R1-R5,
-R9, R16)."""
+"""Durability: kill -9 and restart of a real `flocklab serve`, killed workers of the
+in-process app, final states (R1-R5, R9, R16)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""GET /v1/jobs/{id}/trajectory.gsd on a real server: the job's GSD file (recording.format
+"""GET /v1/jobs/{id}/trajectory.gsd on the real app: the job's GSD file (recording.format
 gsd) with its digest and Range support, a 404 problem for a job without one, and the
 clients' `download(path, format="gsd")`."""
 

@@ -1,6 +1,6 @@
 """Waiting on a job (long-poll until the end, or until a change), cancelling a finished
 job, following its events from the client, listing with a limit, and the service's log
-line at each job's start and end: a real server on 127.0.0.1 with a real worker."""
+line at each job's start and end: the real app in-process with a real worker."""
 
 from __future__ import annotations
 

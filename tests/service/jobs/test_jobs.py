@@ -1,4 +1,5 @@
-"""The job API on a real server: submit, follow, results, cancel, timeout, idempotency."""
+"""The job API on the real app (in-process): submit, follow, results, cancel, timeout,
+idempotency."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Observables while a job runs: the engine's `on_observations` hand-over (both engine
 paths, bits unchanged), the live file the run folder holds meanwhile, and
-`GET /v1/jobs/{id}/observables` on a real server (rows grow while running; the final
+`GET /v1/jobs/{id}/observables` on the real app (rows grow while running; the final
 answer is observables.csv), with the Python client's `Job.observables()`."""
 
 from __future__ import annotations
