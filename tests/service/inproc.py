@@ -27,16 +27,22 @@ from flocklab.service.app.settings import load_settings
 def settings_from_env(env: dict[str, str], data_dir: Path) -> Any:
     """The settings a `flocklab serve` child with these FLOCKLAB_* variables added to the
     test process's environment would load (read the same way: JSON lists and all)."""
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
+    saved = _set_environ(env)
     try:
         return load_settings(None, data_dir=data_dir)
     finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+        _set_environ(saved)
+
+
+def _set_environ(env: dict[str, str | None]) -> dict[str, str | None]:
+    """Set (None: remove) these variables; return what they were."""
+    saved = {k: os.environ.get(k) for k in env}
+    for k, v in env.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
+    return saved
 
 
 class InProcessServer:
@@ -47,7 +53,15 @@ class InProcessServer:
 
     def __init__(self, data_dir: Path, env: dict[str, str] | None = None):
         self.data_dir = Path(data_dir)
-        self.settings = settings_from_env(env or {}, self.data_dir)
+        env = env or {}
+        self.settings = settings_from_env(env, self.data_dir)
+        # Variables that are no setting (FLOCKLAB_SWEEP_BATCH_RUNS) are read by the workers
+        # from their environment: they stay set while this service runs (a spawned worker
+        # inherits the test process's), as they would be for a `flocklab serve` child.
+        fields = type(self.settings).model_fields
+        self._worker_env = {k: v for k, v in env.items()
+                            if k.removeprefix("FLOCKLAB_").lower() not in fields}
+        self._saved_env: dict[str, str | None] = {}
         self.app = create_app(self.settings)
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, daemon=True,
@@ -61,16 +75,22 @@ class InProcessServer:
     # -- lifespan (the ASGI protocol, as uvicorn drives it) ------------------------------
 
     def start(self) -> InProcessServer:
+        self._saved_env = _set_environ(self._worker_env)
         self._thread.start()
         self.call(self._startup())
         return self
 
     def stop(self) -> None:
+        """The lifespan's shutdown (what SIGTERM runs under uvicorn); a second stop is a
+        no-op."""
+        if self._loop.is_closed():
+            return
         if self._lifespan is not None:
             self.call(self._shutdown())
         self._loop.call_soon_threadsafe(self._loop.stop)
         self._thread.join(30)
         self._loop.close()
+        _set_environ(self._saved_env)
 
     async def _startup(self) -> None:
         self._to_app = asyncio.Queue()
