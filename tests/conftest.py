@@ -3,6 +3,10 @@ import os
 import pytest
 
 os.environ.setdefault("TI_LOG_LEVEL", "warn")
+# Taichi's offline cache keeps 100 MB by default and evicts the least recently used quarter
+# beyond it: the worktrees on one machine outgrow that and recompile each other's kernels
+# cold (seconds each). Workers and CLI children inherit the setting.
+os.environ.setdefault("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES", str(2**31 - 1))
 
 
 @pytest.fixture(scope="session")
@@ -62,6 +66,12 @@ def fixed_windows(monkeypatch):
 SLOW_LANES = ("slow", "ray", "e2e")
 
 
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "slow_cases(*ids): the listed parametrised cases of this test (their ids, "
+        "as in test_x[id]) are in the slow lane; the others stay in the fast one")
+
+
 def pytest_addoption(parser):
     parser.addoption("--all", action="store_true",
                      help="run every lane: the fast one and the slow, ray and e2e tests")
@@ -72,6 +82,8 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if e2e in item.path.parents:
             item.add_marker(pytest.mark.e2e)
+        if _slow_case(item):
+            item.add_marker(pytest.mark.slow)
     if config.getoption("--all") or config.getoption("markexpr"):
         return  # everything, or the lanes a -m expression names
     keep = [it for it in items if not any(it.get_closest_marker(m) for m in SLOW_LANES)]
@@ -84,3 +96,12 @@ def pytest_report_header(config):
     if not (config.getoption("--all") or config.getoption("markexpr")):
         return "lane: fast (the slow, ray and e2e tests are left out: --all runs them)"
     return None
+
+
+def _slow_case(item: pytest.Item) -> bool:
+    """Whether `item` is one of the cases its `slow_cases` marker names: the heavy twins of
+    a parametrised test (large N, long runs, a second schedule of the same long run), whose
+    cheaper cases keep the behaviour in the fast lane."""
+    marker = item.get_closest_marker("slow_cases")
+    callspec = getattr(item, "callspec", None)
+    return marker is not None and callspec is not None and callspec.id in marker.args

@@ -1,16 +1,14 @@
-"""Fixtures for the client tests: a real `flocklab serve` on 127.0.0.1."""
+"""Fixtures for the client tests: the real service in this process (the real app, store
+and workers: tests/service/inproc.py), reached through the client's `transport=` seam."""
 
 from __future__ import annotations
 
-import contextlib
-import os
-import signal
 from collections.abc import Iterator
 from typing import Any
 
 import pytest
 
-from flocklab.service.serve import ServerProcess
+from tests.service.inproc import InProcessServer
 
 ENV = {
     "FLOCKLAB_WARMUP_PRESET": "",
@@ -20,25 +18,21 @@ ENV = {
 }
 
 
-def start(data_dir, env: dict[str, str]) -> Iterator[ServerProcess]:
-    s = ServerProcess(data_dir, env={**ENV, **env}).start()
+def start(data_dir, env: dict[str, str]) -> Iterator[InProcessServer]:
+    s = InProcessServer(data_dir, {**ENV, **env}).start()
     try:
         yield s
     finally:
-        workers = s.children()
         s.stop()
-        for pid in workers:  # only this server's own workers, by pid
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
 
 
 @pytest.fixture(scope="session")
-def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
     yield from start(tmp_path_factory.mktemp("client") / "data", {})
 
 
 @pytest.fixture(scope="session")
-def strict_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+def strict_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
     """An API key, one queued job at most, results kept for 1 s."""
     yield from start(tmp_path_factory.mktemp("strict") / "data", {
         "FLOCKLAB_API_KEY": "k3y", "FLOCKLAB_MAX_QUEUED": "1",

@@ -1,5 +1,6 @@
-"""The Python client against a real server: sync and async, results as numpy, typed
-errors, and an import that never pulls in Taichi or FastAPI."""
+"""The Python client against the real service (in-process, through `transport=`): sync
+and async, results as numpy, typed errors, and an import that never pulls in Taichi or
+FastAPI."""
 
 from __future__ import annotations
 
@@ -12,7 +13,6 @@ import time
 import uuid
 
 import h5py
-import httpx
 import numpy as np
 import pytest
 
@@ -34,7 +34,7 @@ def test_importing_clients_loads_neither_taichi_nor_fastapi():
 
 def test_submit_wait_and_fetch_results(server, tmp_path, capsys):
     sc = Scenario.model_validate_json(json.dumps(scenario(n=80, steps=20, every=5)))
-    with clients.Client(server.url, transport=httpx.HTTPTransport(retries=1)) as c:
+    with clients.Client(server.url, transport=server.transport) as c:
         job = c.submit(sc)
         assert job.status in ("queued", "running")
         assert job.wait(timeout=120, progress=True) is job
@@ -67,7 +67,7 @@ def test_submit_wait_and_fetch_results(server, tmp_path, capsys):
 
 
 def test_presets_dicts_listing_and_catalog(server):
-    with clients.Client(server.url) as c:
+    with clients.Client(server.url, transport=server.transport) as c:
         a = c.submit(preset="vicsek-1995", overrides={"time": {"steps": 5}})
         b = c.submit(scenario(steps=3), timeout_seconds=60, idempotency_key=str(uuid.uuid4()))
         assert a.wait(120).status == b.wait(120).status == "succeeded"
@@ -85,7 +85,7 @@ def test_presets_dicts_listing_and_catalog(server):
 
 
 def test_typed_errors_carry_the_problem(server):
-    with clients.Client(server.url) as c:
+    with clients.Client(server.url, transport=server.transport) as c:
         bad = scenario()
         bad["time"]["dt"] = -1
         with pytest.raises(clients.UnprocessableEntity) as err:
@@ -108,7 +108,7 @@ def test_typed_errors_carry_the_problem(server):
 
 
 def test_wait_timeout_then_cancel(server):
-    with clients.Client(server.url) as c:
+    with clients.Client(server.url, transport=server.transport) as c:
         job = c.submit(LONG)
         t0 = time.monotonic()
         with pytest.raises(clients.JobTimeout):
@@ -120,11 +120,12 @@ def test_wait_timeout_then_cancel(server):
 
 
 def test_auth_queue_limit_and_expiry_errors(strict_server):
-    with clients.Client(strict_server.url) as anonymous:
+    with clients.Client(strict_server.url, transport=strict_server.transport) as anonymous:
         with pytest.raises(clients.Unauthorized):
             anonymous.jobs().__next__()
         assert anonymous.health()["status"] == "ok"
-    with clients.Client(strict_server.url, api_key="k3y") as c:
+    with clients.Client(strict_server.url, api_key="k3y",
+                        transport=strict_server.transport) as c:
         done = c.submit(scenario(steps=2)).wait(120)
         assert done.status == "succeeded"
         deadline = time.monotonic() + 10
@@ -147,7 +148,7 @@ def test_auth_queue_limit_and_expiry_errors(strict_server):
 
 def test_async_client(server):
     async def main() -> None:
-        async with clients.AsyncClient(server.url) as c:
+        async with clients.AsyncClient(server.url, transport=server.async_transport) as c:
             job = await c.submit(scenario(steps=10, every=5))
             await job.wait(timeout=120, progress=False)
             assert job.status == "succeeded"
@@ -173,7 +174,7 @@ def test_a_failed_job_carries_its_problem_typed(server):
             "neighbours": {"radius": 2.0},
             "initial": {"kind": "explicit", "positions": [[0, 0], [0, 0], [1, 0]]},
             "time": {"steps": 50, "dt": 0.01}, "recording": {"every": 1}}
-    with clients.Client(server.url) as c:
+    with clients.Client(server.url, transport=server.transport) as c:
         job = c.submit(body).wait(timeout=120)
     assert job.status == "failed"
     assert isinstance(job.error, Problem) and job.error.type.endswith("diverged")

@@ -39,7 +39,7 @@ def spec(etas: list[float] | None = None, replicas: int = 2, steps: int = 40,
 
 
 def test_sync_sweep_wait_returns_the_table(server):
-    with Client(server.url) as c:
+    with Client(server.url, transport=server.transport) as c:
         handle = c.sweep(Sweep.model_validate_json(json.dumps(spec())))
         assert isinstance(handle, SweepJob) and isinstance(handle.state, SweepStatus)
         assert handle.state.runs_total == 6
@@ -80,7 +80,7 @@ def test_sync_sweep_wait_returns_the_table(server):
 
 
 def test_sync_sweep_errors_and_cancel(server):
-    with Client(server.url) as c:
+    with Client(server.url, transport=server.transport) as c:
         bad = spec(etas=[1.0, -2.0])
         with pytest.raises(UnprocessableEntity) as err:
             c.sweep(bad)
@@ -105,7 +105,7 @@ def test_sync_sweep_errors_and_cancel(server):
 
 def test_async_sweep(server):
     async def main() -> tuple[np.ndarray, SweepStatus, np.ndarray]:
-        async with AsyncClient(server.url) as c:
+        async with AsyncClient(server.url, transport=server.async_transport) as c:
             handle = await c.sweep(spec(etas=[0.5, 2.5], replicas=1),
                                    idempotency_key="async-sweep-1")
             again = await c.sweep(spec(etas=[0.5, 2.5], replicas=1),

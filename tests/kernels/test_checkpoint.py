@@ -155,6 +155,7 @@ def stopped_run(tmp: Path, data: dict, name: str = "run", path: str = "auto") ->
 
 
 @pytest.mark.parametrize("path", ["fused", "per_step"])
+@pytest.mark.slow_cases("per_step")  # the fused twin stays fast
 def test_a_stopped_run_resumes_to_the_uninterrupted_bits(tmp_path, capsys, path):
     # Theorem 2's intervals at density 1 span tens of steps: the one open at the
     # checkpoint (step 40) goes on after it.

@@ -30,6 +30,7 @@ def m2(dt: float, spacing: float, speed: float, steps: int = 400) -> dict:
             "seed": 3}
 
 
+@pytest.mark.slow_cases("per_step")  # the fused twin stays fast
 def test_q_rise_reported_on_both_paths(taichi_cpu, path):
     res = kernels.run(Scenario.model_validate(m2(0.05, 0.7, 2.0)))
     assert res.status == "completed" and res.extra["engine_path"] == path

@@ -53,6 +53,10 @@ VICSEK_CASES = [vk.CASES[k] for k in (0, 1, 3, 4, 5, 8, 9, 10, 11)]
 
 @pytest.mark.parametrize("case", VICSEK_CASES,
                          ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()))
+# Each float32 case compiles its kernels afresh; every rule keeps a fast case on each path.
+@pytest.mark.slow_cases("fused-rule=leader-L=None-leader_heading=0.7",
+                        "fused-rule=laplacian-g=100.0-L=None-inclusive=False",
+                        "per_step-rule=laplacian-g=100.0-L=None-inclusive=False")
 def test_vicsek_float32_matches_reference_step_by_step(path, case):
     sc = f32(vk.scenario(**case))
     result, sink = vk.run_frames(sc)
@@ -107,6 +111,8 @@ M2_CASES = [fr.M2_CASES[k] for k in (0, 1, 3, 5, 6)]
 
 
 @pytest.mark.parametrize("case", M2_CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
+# The fixed graph stays fast on per_step, the switching grid on fused.
+@pytest.mark.slow_cases("fused-fixed", "per_step-switching-grid")
 def test_flocking_float32_matches_reference_step_by_step(path, case):
     sc = f32(fr.m2_scenario(**case, steps=60))
     a, _ = sc.model.potential.coefficients()
@@ -127,6 +133,8 @@ M3_CASES = [fr.M3_CASES[k] for k in (0, 2, 6, 9)]
 
 
 @pytest.mark.parametrize("case", M3_CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
+# The grid stays fast on fused; RK4 in float32 in the flocking test above.
+@pytest.mark.slow_cases("per_step-grid", "per_step-rk4-3-grid")
 def test_obstacles_float32_matches_reference_step_by_step(path, case):
     sc = f32(fr.m3_scenario(**dict(case), steps=60))
     ref = fr.M3Ref(sc.model, sc.neighbours.radius, sc.inclusive)
@@ -170,6 +178,8 @@ DETERMINISM = {
 
 
 @pytest.mark.parametrize("family", list(DETERMINISM))
+# Each family stays fast on one path (Taichi restarts per thread count: seconds each).
+@pytest.mark.slow_cases("fused-flocking", "per_step-vicsek", "fused-formation")
 def test_float32_same_seed_same_bits_alone_in_a_batch_and_on_any_threads(path, family):
     base = DETERMINISM[family]().model_dump(mode="json")
     alone = kernels.run(Scenario.model_validate({**base, "precision": "float32"}))

@@ -1,5 +1,7 @@
-"""Fixtures for the service tests: real `flocklab serve` processes on 127.0.0.1 with real
-SQLite stores and real spawned Taichi workers (no mocks)."""
+"""Fixtures for the service tests: the real app with real SQLite stores and real spawned
+Taichi workers (no mocks), in this process over `httpx.ASGITransport` (`server`, `http`,
+`make_app`: tests/service/inproc.py) or as real `flocklab serve` processes on 127.0.0.1
+(`real_server`, `make_server`) for what needs a socket or a process to kill."""
 
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ import httpx
 import pytest
 
 from flocklab.service.serve import ServerProcess
+from tests.service.inproc import InProcessServer
 
 MiB = 2**20
 
@@ -29,9 +32,37 @@ TEST_ENV = {
 
 
 @pytest.fixture(scope="session")
-def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    """One shared server for the tests that do not need special settings."""
-    yield from _serve(tmp_path_factory.mktemp("shared") / "data", TEST_ENV)
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
+    """One shared service for the tests that do not need special settings: the real app,
+    store and workers in this process."""
+    s = InProcessServer(tmp_path_factory.mktemp("shared") / "data", TEST_ENV).start()
+    try:
+        yield s
+    finally:
+        s.stop()
+
+
+@pytest.fixture(scope="session")
+def real_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    """One shared `flocklab serve` on a socket (uvicorn's connection handling, its log)."""
+    yield from _serve(tmp_path_factory.mktemp("real") / "data", TEST_ENV)
+
+
+@pytest.fixture
+def make_app(tmp_path: Path) -> Iterator:
+    """Start in-process services with extra settings; all are stopped after."""
+    started: list[InProcessServer] = []
+
+    def make(env: dict[str, str] | None = None,
+             data_dir: Path | None = None) -> InProcessServer:
+        s = InProcessServer(data_dir or tmp_path / f"app{len(started)}",
+                            {**TEST_ENV, **(env or {})})
+        started.append(s)
+        return s.start()
+
+    yield make
+    for s in started:
+        s.stop()
 
 
 @pytest.fixture
@@ -67,6 +98,12 @@ def _cleanup(s: ServerProcess) -> None:
 
 
 @pytest.fixture
-def http(server: ServerProcess) -> Iterator[httpx.Client]:
-    with httpx.Client(base_url=server.url, timeout=30) as c:
+def http(server: InProcessServer) -> Iterator[httpx.Client]:
+    with server.client(timeout=30) as c:
+        yield c
+
+
+@pytest.fixture
+def real_http(real_server: ServerProcess) -> Iterator[httpx.Client]:
+    with httpx.Client(base_url=real_server.url, timeout=30) as c:
         yield c

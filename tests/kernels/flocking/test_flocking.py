@@ -133,6 +133,7 @@ def test_complete_graph_synchronises_faster_than_path(path):
         assert complete[t, 0] < 0.1 * chain[t, 0]
 
 
+@pytest.mark.slow_cases("per_step")  # 10^4 steps; the fused twin stays fast
 def test_switching_preset_flocks_without_collisions(path):
     """Paper 000, section 6: velocities synchronised by t = 100 s; no collisions."""
     result = kernels.run(preset("tjp-switching", observables_every=10))
@@ -149,6 +150,7 @@ def test_switching_preset_flocks_without_collisions(path):
     json.dumps(result.summary(), allow_nan=False)
 
 
+@pytest.mark.slow_cases("per_step")  # the fused twin stays fast
 def test_fixed_preset_flocks(path):
     """Paper 000, Fig. 4/7: a connected random graph synchronises the velocities; W falls."""
     result = kernels.run(preset("tjp-fixed", observables_every=50))
@@ -268,6 +270,7 @@ def test_random_graph_depends_on_its_seed():
     assert np.array_equal(build_edges(pinned, 200, 1)[0], build_edges(pinned, 200, 2)[0])
 
 
+@pytest.mark.slow  # the small random graphs above stay fast
 def test_random_connected_graph_at_a_million_agents():
     """N = 10^6 with mean degree 10: connected, no repeats, built without an N^2 step."""
     n = 1_000_000

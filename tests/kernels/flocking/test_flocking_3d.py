@@ -63,6 +63,8 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
+# RK4 and the grid stay fast in per_step-fixed-rk4 and the switching-grid-64 cases.
+@pytest.mark.slow_cases("per_step-switching-grid-rk4")
 def test_matches_brute_force_step_by_step(taichi_cpu, path, case):
     """On both engine paths (RK4 has only the per-step one)."""
     sc = scenario(**case)
@@ -144,6 +146,9 @@ def m3_scenario(steps=150, search="auto", **model) -> Scenario:
 @pytest.mark.parametrize("case", [dict(), dict(search="grid", radius_rule="min"),
                                   dict(integrator="rk4", kappa=2.0, damping_region="everywhere")],
                          ids=["own", "min-grid", "rk4-kappa2"])
+# Minutes of Python reference in 3D; radius_rule "min" on the grid and RK4 stay fast in 2D
+# (test_flocking_reference.py, test_obstacles.py).
+@pytest.mark.slow_cases("per_step-min-grid", "per_step-rk4-kappa2")
 def test_obstacles_match_brute_force_step_by_step(taichi_cpu, path, case):
     """On both engine paths (RK4 and radius_rule "min" have only the per-step one)."""
     from tests.kernels.flocking.test_flocking_reference import M3Ref

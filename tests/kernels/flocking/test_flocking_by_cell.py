@@ -60,6 +60,10 @@ def outputs(k, blocks: bool) -> list[np.ndarray]:
 
 
 @pytest.mark.parametrize("case", CASES)
+# Each case compiles its own kernels (a minute each here): the plain 2D and 3D, crowded and
+# M3 cases stay fast; ties at the radius stay fast in vicsek/test_vicsek_by_cell.py and the
+# grid tests, radius_rule "min" in test_flocking_reference.py.
+@pytest.mark.slow_cases("m2-2d-inclusive-ties", "m2-3d-inclusive-ties", "m3-2d-min")
 def test_by_cell_kernels_equal_the_per_agent_ones_bit_for_bit(case):
     sc = CASES[case]()
     rt = kernels.runtime.ensure("cpu")

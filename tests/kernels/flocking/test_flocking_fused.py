@@ -148,6 +148,8 @@ AGREEMENT["mission-3d-adaptive"] = MIXES["mission-3d"][0]
 
 
 @pytest.mark.parametrize("case", list(AGREEMENT))
+# Its own kernels (most of a minute); missions in 3D stay fast in mission-3d.
+@pytest.mark.slow_cases("mission-3d-obstacle-lattice")
 def test_the_fused_path_agrees_with_the_per_step_path(taichi_cpu, monkeypatch, case):
     """Every observable, the extras and the frames, to rounding (the summation order
     differs)."""

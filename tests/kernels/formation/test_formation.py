@@ -151,6 +151,10 @@ CASES = {
 
 
 @pytest.mark.parametrize("name", list(CASES))
+# per_step keeps F1-linear-rotate, F2-linear-stops and F1-linear-rk4-rotate in the fast lane;
+# the fused twins of these three run fast.
+@pytest.mark.slow_cases("per_step-F1-quadratic-morph", "per_step-F1-saturating",
+                        "per_step-F2-quadratic-rk4")
 def test_matches_brute_force_step_by_step(path, name):
     m = CASES[name]
     sc = scenario(m, obs_every=40)
@@ -206,6 +210,7 @@ def test_observables_match_the_reference(path):
 
 
 @pytest.mark.parametrize("sign, expected", [("eq8", 0.0), ("prop3.2", 2 * 3.0 / 2.0)])
+@pytest.mark.slow_cases("per_step-eq8-0.0", "per_step-prop3.2-3.0")  # long runs; fused stays
 def test_linear_f_settles_at_the_lag_of_eq8(path, sign, expected):
     """Constant-velocity leader, linear f: r_i - r_id -> a = -q/k (eq. 8); the lag_sign
     choice moves only the reference point of the formation error (to +q/k)."""
@@ -259,6 +264,7 @@ def test_lyapunov_never_increases_once_the_leader_is_still(path, design):
     assert V[still][-1] < 0.9 * V[still][0]  # and it does decrease
 
 
+@pytest.mark.slow_cases("per_step")  # a long run; the fused twin stays fast
 def test_rk4_is_far_more_accurate_than_euler(path):
     m = dict(design="F2", attraction={"kind": "linear", "k": 1.0},
              repulsion={"kind": "inverse", "k_g": 20.0}, path=STRAIGHT)

@@ -79,6 +79,8 @@ def assert_same(pos, r, L, inclusive):
 
 @pytest.mark.parametrize("inclusive", [True, False])
 @pytest.mark.parametrize("L", [None, 10.0, 7.3])
+# The box (7.3, both inclusives) and the plane stay fast.
+@pytest.mark.slow_cases("None-True", "10.0-True", "10.0-False")
 def test_random_configurations(taichi_cpu, inclusive, L):
     rng = np.random.default_rng(3)
     pos = rng.uniform(0, L or 10.0, size=(400, 2))
@@ -173,6 +175,8 @@ def test_build_is_deterministic(taichi_cpu):
 
 @pytest.mark.parametrize("inclusive", [True, False])
 @pytest.mark.parametrize("L", [None, 8.0, 2.5, 3.0])
+# Small boxes (both inclusives) and the plane stay fast.
+@pytest.mark.slow_cases("None-True", "8.0-True", "8.0-False")
 def test_half_stencil_graph_matches_brute_force(taichi_cpu, inclusive, L):
     """Degrees and component count from the half-stencil union-find pass."""
     from scipy.sparse.csgraph import connected_components

@@ -75,6 +75,8 @@ def assert_same(pos, r, L, inclusive, serial=True):
 
 @pytest.mark.parametrize("inclusive", [True, False])
 @pytest.mark.parametrize("L", [None, 6.0, 4.3])
+# The box (4.3, both inclusives) and the plane stay fast.
+@pytest.mark.slow_cases("None-True", "6.0-True", "6.0-False")
 def test_random_configurations(taichi_cpu, inclusive, L):
     rng = np.random.default_rng(3)
     pos = rng.uniform(0, L or 6.0, size=(500, 3))
@@ -161,6 +163,8 @@ def test_build_is_deterministic(taichi_cpu):
 
 @pytest.mark.parametrize("inclusive", [True, False])
 @pytest.mark.parametrize("L", [None, 6.0, 2.5])
+# A small box and the plane (both inclusives) stay fast.
+@pytest.mark.slow_cases("6.0-True", "6.0-False")
 def test_half_stencil_graph_matches_brute_force(taichi_cpu, inclusive, L):
     """Degrees and component count from the half-stencil union-find pass, in 3D."""
     rng = np.random.default_rng(10)

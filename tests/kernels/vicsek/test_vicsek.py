@@ -73,6 +73,9 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()))
+# The fused path keeps one case of each rule in the fast lane; per_step keeps them all.
+@pytest.mark.slow_cases("fused-rule=leader-L=None-leader_heading=0.7",
+                        "fused-rule=average-eta=0.2-N=30-L=None")
 def test_matches_brute_force_step_by_step(path, case):
     sc = scenario(**case)
     _, sink = run_frames(sc)
@@ -152,6 +155,7 @@ def test_same_seed_same_trajectory_bit_for_bit(path):
     assert not (a.theta[-1] == c.theta[-1]).all()
 
 
+@pytest.mark.slow_cases("per_step")  # Taichi restarts per thread count; fused stays
 def test_thread_count_does_not_change_the_trajectory(path):
     base = scenario(eta=1.0, N=3000, L=25.0, steps=10)
     one = run_frames(base.model_copy(update={"threads": 1}))[1]

@@ -31,6 +31,8 @@ def same_frames(a: Frames, b: Frames) -> None:
 
 @pytest.mark.parametrize("rule", ["vicsek", "average", "laplacian", "leader"])
 @pytest.mark.parametrize("L", [True, None], ids=["periodic", "plane"])
+# Every rule stays fast in the box, the plane with one rule.
+@pytest.mark.slow_cases("plane-average", "plane-laplacian", "plane-leader")
 def test_batched_gives_the_fused_bits_alone_and_together(taichi_cpu, rule, L):
     scenarios = mix(rule, bool(L), every=7, track_linked_intervals=True)
     (fused, fs), (batched, bs) = both(scenarios[1])

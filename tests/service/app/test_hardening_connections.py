@@ -7,22 +7,27 @@ from __future__ import annotations
 import json
 import socket
 import time
+from collections.abc import Iterator
 
 import httpx
 import pytest
 
 from flocklab.service.app.connections import RESERVED_FDS, connection_cap
+from flocklab.service.serve import ServerProcess
+from tests.service.conftest import TEST_ENV, _serve
 from tests.service.svc_helpers import long_scenario, submit
 
 CAP = 16
 TIMEOUT = 1.0
 
 
-@pytest.fixture
-def guarded(make_server):
-    return make_server({"FLOCKLAB_HEADER_TIMEOUT_SECONDS": str(TIMEOUT),
-                        "FLOCKLAB_BODY_TIMEOUT_SECONDS": str(TIMEOUT),
-                        "FLOCKLAB_MAX_CONNECTIONS": str(CAP)})
+@pytest.fixture(scope="module")
+def guarded(tmp_path_factory) -> Iterator[ServerProcess]:
+    """One real server for the module (the limits are uvicorn's, on a socket); the first
+    test reads its log, before the others add to it."""
+    yield from _serve(tmp_path_factory.mktemp("guarded") / "data", {
+        **TEST_ENV, "FLOCKLAB_HEADER_TIMEOUT_SECONDS": str(TIMEOUT),
+        "FLOCKLAB_BODY_TIMEOUT_SECONDS": str(TIMEOUT), "FLOCKLAB_MAX_CONNECTIONS": str(CAP)})
 
 
 def _connect(port: int) -> socket.socket:

@@ -111,10 +111,11 @@ def test_an_unexpected_error_is_a_problem_and_keeps_the_connection(failing_app):
         assert b"connection: close" not in head.lower()
 
 
-def test_a_corrupted_result_500_keeps_the_connection(server, http):
+def test_a_corrupted_result_500_keeps_the_connection(real_server, real_http):
+    http = real_http
     job = wait_for(http, submit(http, {"scenario": scenario()})["id"])
-    (Path(server.data_dir) / "results" / job["id"] / "summary.json").write_text("{not json")
-    heads = _two_requests_on_one_connection(server.port, f"/v1/jobs/{job['id']}/metrics")
+    (Path(real_server.data_dir) / "results" / job["id"] / "summary.json").write_text("{not json")
+    heads = _two_requests_on_one_connection(real_server.port, f"/v1/jobs/{job['id']}/metrics")
     assert all(h.startswith(b"HTTP/1.1 500 ") for h in heads)
 
 
@@ -134,11 +135,9 @@ def test_initial_speeds_of_double_integrators_are_checked(http):
     assert_problem(r, 422, "initial.speed_range")
 
 
-def test_observables_count_against_the_limits(make_server):
-    import httpx
-
-    s = make_server({"FLOCKLAB_MAX_OBSERVABLE_ROWS": "1000"})
-    with httpx.Client(base_url=s.url, timeout=30) as http:
+def test_observables_count_against_the_limits(make_app):
+    s = make_app({"FLOCKLAB_MAX_OBSERVABLE_ROWS": "1000"})
+    with s.client(timeout=30) as http:
         every_step = scenario(steps=5000, every=0)
         assert_problem(http.post("/v1/jobs", json={"scenario": every_step}), 422,
                        "recording.observables_every")
@@ -157,7 +156,8 @@ def test_threads_are_capped_at_the_workers_cpus_and_reported(server, http):
         assert threads < 64, threads
 
 
-def test_long_metrics_are_streamed(http):
+def test_long_metrics_are_streamed(real_http):
+    http = real_http  # uvicorn's chunked transfer encoding
     job = wait_for(http, submit(http, {"scenario": scenario(n=10, steps=1500, every=0)})["id"])
     assert job["status"] == "succeeded"
     r = http.get(f"/v1/jobs/{job['id']}/metrics")

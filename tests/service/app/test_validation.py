@@ -122,9 +122,9 @@ def test_oversized_body_is_413_before_parsing(http, server):
     assert _job_count(http) == before
 
 
-def test_a_lying_content_length_is_refused_without_reading_the_body(server):
+def test_a_lying_content_length_is_refused_without_reading_the_body(real_server):
     """A huge declared length is answered at once, before any body byte is sent."""
-    with socket.create_connection(("127.0.0.1", server.port), timeout=10) as sock:
+    with socket.create_connection(("127.0.0.1", real_server.port), timeout=10) as sock:
         sock.sendall(b"POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
                      b"Content-Length: 10000000000\r\n\r\n")
         reply = sock.recv(4096).decode()

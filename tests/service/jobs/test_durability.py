@@ -1,5 +1,5 @@
-"""Durability on a real server: kill -9 and restart, killed workers, final states (R1-R5,
-R9, R16)."""
+"""Durability: kill -9 and restart of a real `flocklab serve`, killed workers of the
+in-process app, final states (R1-R5, R9, R16)."""
 
 from __future__ import annotations
 
@@ -80,9 +80,9 @@ def test_kill_9_mid_job_then_restart_loses_and_duplicates_nothing(make_server, t
     assert list((data / "results" / ".attempts").iterdir()) == []
 
 
-def test_a_second_service_on_the_same_data_dir_is_refused(make_server, tmp_path):
+def test_a_second_service_on_the_same_data_dir_is_refused(make_app, tmp_path):
     data = tmp_path / "data"
-    make_server(data_dir=data)
+    make_app(data_dir=data)  # the first service holds the lock (in this process)
     second = ServerProcess(data, env={"FLOCKLAB_WARMUP_PRESET": ""})
     with pytest.raises(RuntimeError, match="exited"):
         second.start(timeout=30)

@@ -1,4 +1,4 @@
-"""GET /v1/jobs/{id}/trajectory.gsd on a real server: the job's GSD file (recording.format
+"""GET /v1/jobs/{id}/trajectory.gsd on the real app: the job's GSD file (recording.format
 gsd) with its digest and Range support, a 404 problem for a job without one, and the
 clients' `download(path, format="gsd")`."""
 
@@ -52,7 +52,7 @@ def test_clients_download_the_gsd_file(server, tmp_path):
 
     body = scenario(n=25, steps=10, every=5)
     body["recording"]["format"] = "gsd"
-    with clients.Client(server.url) as c:
+    with clients.Client(server.url, transport=server.transport) as c:
         job = c.submit(body).wait(timeout=120)
         assert job.status == "succeeded"
         path = job.download(tmp_path / "sync.gsd", format="gsd")
@@ -60,7 +60,7 @@ def test_clients_download_the_gsd_file(server, tmp_path):
             job.download(tmp_path / "x", format="xyz")
 
     async def fetch() -> Path:
-        async with clients.AsyncClient(server.url) as c:
+        async with clients.AsyncClient(server.url, transport=server.async_transport) as c:
             return await (await c.job(job.id)).download(tmp_path / "aio.gsd", format="gsd")
 
     other = asyncio.run(fetch())

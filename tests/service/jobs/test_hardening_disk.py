@@ -35,10 +35,10 @@ def _wait_for_partial(data: Path, timeout: float = 30) -> None:
         time.sleep(0.05)
 
 
-def test_a_killed_worker_leaves_no_partial_output(make_server, tmp_path):
+def test_a_killed_worker_leaves_no_partial_output(make_app, tmp_path):
     data = tmp_path / "data"
-    s = make_server({"FLOCKLAB_MAX_ATTEMPTS": "1"}, data_dir=data)
-    with httpx.Client(base_url=s.url, timeout=30) as http:
+    s = make_app({"FLOCKLAB_MAX_ATTEMPTS": "1"}, data_dir=data)
+    with s.client(timeout=30) as http:
         job = submit(http, {"scenario": long_scenario()})
         _wait_running(http, job["id"])
         _wait_for_partial(data)
@@ -90,19 +90,19 @@ def _fill(disk: Path, leave: int) -> Path:
     return filler
 
 
-# small_disk before make_server: the servers stop before the disk is unmounted.
-def test_a_full_disk_is_503_on_submit_and_a_clear_job_error(small_disk, make_server, tmp_path):
+# small_disk before make_app: the services stop before the disk is unmounted.
+def test_a_full_disk_is_503_on_submit_and_a_clear_job_error(small_disk, make_app, tmp_path):
     if small_disk is None:
         # No mount here: a reserve larger than the disk's free space trips the same check.
-        s = make_server({"FLOCKLAB_MIN_FREE_DISK_BYTES": str(free_bytes(tmp_path) + 2**40)})
-        with httpx.Client(base_url=s.url, timeout=30) as http:
+        s = make_app({"FLOCKLAB_MIN_FREE_DISK_BYTES": str(free_bytes(tmp_path) + 2**40)})
+        with s.client(timeout=30) as http:
             body = assert_problem(http.post("/v1/jobs", json={"scenario": scenario()}), 503)
         assert body["type"].endswith("insufficient-storage")
         pytest.skip("cannot mount a tmpfs here: only the reserve check ran")
     data = small_disk / "data"
-    s = make_server({"FLOCKLAB_MIN_FREE_DISK_BYTES": str(2 * MiB),
-                     "FLOCKLAB_MAX_TRAJECTORY_BYTES": str(256 * MiB)}, data_dir=data)
-    with httpx.Client(base_url=s.url, timeout=30) as http:
+    s = make_app({"FLOCKLAB_MIN_FREE_DISK_BYTES": str(2 * MiB),
+                  "FLOCKLAB_MAX_TRAJECTORY_BYTES": str(256 * MiB)}, data_dir=data)
+    with s.client(timeout=30) as http:
         # Above the reserve but too little for this job's ~20 MiB of frames.
         filler = _fill(small_disk, 6 * MiB)
         big = scenario(n=2000, steps=300, every=1)

@@ -101,9 +101,9 @@ def test_sigterm_answers_long_polls_and_ends_streams_at_once(make_server):
     assert "Cancel" not in s.log_path.read_text()
 
 
-def test_a_second_service_on_a_locked_data_dir_exits_1(make_server, tmp_path):
+def test_a_second_service_on_a_locked_data_dir_exits_1(make_app, tmp_path):
     data = tmp_path / "data"
-    make_server(data_dir=data)
+    make_app(data_dir=data)  # the first service holds the lock (in this process)
     second = subprocess.run(
         [sys.executable, "-m", "flocklab.service.serve", "--data-dir", str(data),
          "--port", str(free_port())], capture_output=True, text=True, timeout=120,

@@ -1,9 +1,10 @@
 """Waiting on a job (long-poll until the end, or until a change), cancelling a finished
 job, following its events from the client, listing with a limit, and the service's log
-line at each job's start and end: a real server on 127.0.0.1 with a real worker."""
+line at each job's start and end: the real app in-process with a real worker."""
 
 from __future__ import annotations
 
+import logging
 import re
 import time
 
@@ -68,8 +69,9 @@ def test_cancelling_any_finished_job_is_409(http: httpx.Client):
     assert http.get(f"/v1/jobs/{job['id']}").json()["status"] == "cancelled"
 
 
-def test_client_events_limit_and_the_job_log(server):
-    with clients.Client(server.url) as c:
+def test_client_events_limit_and_the_job_log(server, caplog):
+    caplog.set_level(logging.INFO, logger="flocklab.jobs")
+    with clients.Client(server.url, transport=server.transport) as c:
         job = c.submit(medium_scenario())
         states = list(job.events())
         assert states, "no events"
@@ -90,7 +92,7 @@ def test_client_events_limit_and_the_job_log(server):
         with pytest.raises(ValueError):
             list(c.jobs(limit=0))
 
-    log = server.log_path.read_text()
+    log = caplog.text
     started = re.search(rf"job {job.id} started: job vicsek, N = 1000, 1000 steps, "
                         r"attempt 1", log)
     ended = re.search(rf"job {job.id} ended: succeeded after (\d+\.\d+) s \(job vicsek, "
@@ -103,7 +105,7 @@ def test_async_client_events(server):
     import asyncio
 
     async def main() -> list[dict]:
-        async with clients.AsyncClient(server.url) as c:
+        async with clients.AsyncClient(server.url, transport=server.async_transport) as c:
             job = await c.submit(scenario(steps=200))
             states = [s async for s in job.events()]
             assert [j.id async for j in c.jobs(limit=1)] == [job.id]

@@ -1,4 +1,5 @@
-"""The job API on a real server: submit, follow, results, cancel, timeout, idempotency."""
+"""The job API on the real app (in-process): submit, follow, results, cancel, timeout,
+idempotency."""
 
 from __future__ import annotations
 
@@ -19,9 +20,8 @@ from tests.service.svc_helpers import assert_problem, long_scenario, scenario, s
 @pytest.fixture(scope="module")
 def finished(server):
     """One succeeded job with frames 0, 5, ..., 40 of 120 agents."""
-    import httpx
 
-    with httpx.Client(base_url=server.url, timeout=30) as http:
+    with server.client(timeout=30) as http:
         job = submit(http, {"scenario": scenario(n=120, steps=40, every=5)})
         done = wait_for(http, job["id"], timeout=120)
     assert done["status"] == "succeeded", done

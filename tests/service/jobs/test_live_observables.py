@@ -1,6 +1,6 @@
 """Observables while a job runs: the engine's `on_observations` hand-over (both engine
 paths, bits unchanged), the live file the run folder holds meanwhile, and
-`GET /v1/jobs/{id}/observables` on a real server (rows grow while running; the final
+`GET /v1/jobs/{id}/observables` on the real app (rows grow while running; the final
 answer is observables.csv), with the Python client's `Job.observables()`."""
 
 from __future__ import annotations
@@ -8,7 +8,6 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import httpx
 import numpy as np
 import pytest
 
@@ -124,7 +123,7 @@ def test_rows_grow_while_running_and_end_as_observables_csv(server, http):
     for k, v in final.items():
         assert np.array_equal(np.array(held[k], dtype=float), v, equal_nan=True), k
     # all at once, and through the client, once it has ended: the same series
-    with Client(server.url) as c:
+    with Client(server.url, transport=server.transport) as c:
         got = c.job(job["id"]).observables()
     assert got["partial"] is False and got["status"] == "succeeded"
     for k, v in final.items():
@@ -135,7 +134,7 @@ def test_client_reads_a_running_job_and_pages(server, http):
     spec = scenario(n=100, steps=60_000, every=0)
     spec["recording"]["observables_every"] = 10
     job = submit(http, spec)
-    with Client(server.url) as c:
+    with Client(server.url, transport=server.transport) as c:
         handle = c.job(job["id"])
         deadline = time.monotonic() + 120
         while True:
@@ -170,7 +169,7 @@ def test_observables_route_errors(server, http):
                    422, "query.start")
     assert_problem(http.get(f"/v1/jobs/{job['id']}/observables", params={"limit": 0}),
                    422, "query.limit")
-    assert_problem(httpx.get(f"{server.url}/v1/jobs/not-a-uuid/observables"), 422)
+    assert_problem(http.get("/v1/jobs/not-a-uuid/observables"), 422)
     # a finished job whose observables.csv went missing from its results: 500, not rows
     assert wait_for(http, job["id"])["status"] == "succeeded"
     (Path(server.data_dir) / "results" / job["id"] / "observables.csv").unlink()

@@ -26,7 +26,7 @@ def _worker(server) -> int:
 
 def test_fifty_concurrent_submissions_none_lost_and_worker_memory_flat(server):
     sizes = [50, 200, 500, 1000]
-    with clients.Client(server.url) as c:
+    with clients.Client(server.url, transport=server.transport) as c:
         first = c.submit(scenario(n=1000, steps=20, every=5)).wait(timeout=120)
         assert first.status == "succeeded"
         pid = _worker(server)

@@ -9,7 +9,6 @@ import signal
 import time
 from pathlib import Path
 
-import httpx
 import pytest
 
 from tests.service.svc_helpers import assert_problem, long_scenario, scenario, submit, wait_for
@@ -18,18 +17,18 @@ from tests.service.svc_helpers import assert_problem, long_scenario, scenario, s
 @pytest.fixture(scope="module")
 def tight(tmp_path_factory):
     """Two queued jobs at most, results kept 2 s, 0.05 s between stop request and kill."""
-    from flocklab.service.serve import ServerProcess
-    from tests.service.conftest import TEST_ENV, _cleanup
+    from tests.service.conftest import TEST_ENV
+    from tests.service.inproc import InProcessServer
 
-    s = ServerProcess(tmp_path_factory.mktemp("tight") / "data", env={
+    s = InProcessServer(tmp_path_factory.mktemp("tight") / "data", env={
         **TEST_ENV, "FLOCKLAB_MAX_QUEUED": "2", "FLOCKLAB_RESULT_TTL_SECONDS": "2",
         "FLOCKLAB_CANCEL_GRACE_SECONDS": "0.05"}).start()
     yield s
-    _cleanup(s)
+    s.stop()
 
 
 def test_a_full_queue_answers_429_with_retry_after(tight):
-    with httpx.Client(base_url=tight.url, timeout=30) as http:
+    with tight.client(timeout=30) as http:
         running = submit(http, {"scenario": long_scenario()})
         wait_for(http, running["id"], {"running"})
         queued = [submit(http, {"scenario": scenario()}) for _ in range(2)]
@@ -53,7 +52,7 @@ def _worker(server) -> int:
 def test_a_hung_worker_is_killed_after_the_grace_period(tight, stop):
     """SIGSTOP the worker mid-job so it cannot stop by itself: the supervisor must kill it
     (cancel or timeout enforced from outside, R7/R8), and a new worker takes the next job."""
-    with httpx.Client(base_url=tight.url, timeout=30) as http:
+    with tight.client(timeout=30) as http:
         body = {"scenario": long_scenario()}
         if stop == "timeout":
             body["timeout_seconds"] = 2.0
@@ -78,7 +77,7 @@ def test_a_hung_worker_is_killed_after_the_grace_period(tight, stop):
 
 
 def test_results_expire_after_the_ttl_with_410(tight):
-    with httpx.Client(base_url=tight.url, timeout=30) as http:
+    with tight.client(timeout=30) as http:
         job = submit(http, {"scenario": scenario()})
         done = wait_for(http, job["id"], timeout=120)
         assert done["results"] == "available"
@@ -93,9 +92,9 @@ def test_results_expire_after_the_ttl_with_410(tight):
         assert http.get(f"/v1/jobs/{job['id']}").json()["status"] == "succeeded"
 
 
-def test_api_key_is_required_on_every_route_but_healthz(make_server):
-    s = make_server({"FLOCKLAB_API_KEY": "s3cret-key"})
-    with httpx.Client(base_url=s.url, timeout=30) as http:
+def test_api_key_is_required_on_every_route_but_healthz(make_app):
+    s = make_app({"FLOCKLAB_API_KEY": "s3cret-key"})
+    with s.client(timeout=30) as http:
         assert http.get("/healthz").status_code == 200
         for method, path in [("GET", "/v1/jobs"), ("POST", "/v1/jobs"), ("GET", "/v1/models"),
                              ("GET", "/v1/presets"), ("GET", "/v1/models/vicsek"),
@@ -119,9 +118,9 @@ def test_api_key_is_required_on_every_route_but_healthz(make_server):
         assert http.get("/docs").status_code == 404
 
 
-def test_cors_allows_only_listed_origins(make_server):
-    s = make_server({"FLOCKLAB_CORS_ORIGINS": '["https://lab.example"]'})
-    with httpx.Client(base_url=s.url, timeout=30) as http:
+def test_cors_allows_only_listed_origins(make_app):
+    s = make_app({"FLOCKLAB_CORS_ORIGINS": '["https://lab.example"]'})
+    with s.client(timeout=30) as http:
         ok = http.get("/v1/models", headers={"Origin": "https://lab.example"})
         assert ok.headers["access-control-allow-origin"] == "https://lab.example"
         other = http.get("/v1/models", headers={"Origin": "https://evil.example"})

@@ -148,6 +148,7 @@ def test_large_n_draws_a_field_quickly(large_run, tmp_path):
         assert elapsed < 30, elapsed  # the bar is 5 s at 10^6 (bench/render_bench.py)
 
 
+@pytest.mark.slow  # 10^5-agent runs of four families; Vicsek's large N stays fast above
 @pytest.mark.parametrize("family", ["flocking_switching", "flocking_obstacles",
                                     "formation_F1", "formation_F2"])
 def test_large_n_of_every_family(large_runs, tmp_path, family):
@@ -255,6 +256,8 @@ def test_trajectory_frames_are_in_agent_order(runs):
     ("runs", "formation_F1", (0, 5, -1)),
     ("runs_3d", "flocking_obstacles", (0, 70, -1)),  # depth order and fog change per frame
 ])
+# Two minutes of 3D drawing; the 2D case stays fast (3D frames: test_render_3d.py).
+@pytest.mark.slow_cases("runs_3d-flocking_obstacles-frames1")
 def test_movie_frames_match_full_drawings(request, runs_fixture, family, frames):
     """Blitting (axes drawn once, moving artists per frame) gives the full drawing."""
     from flocklab.service.render.movie import _movie_view

@@ -1,6 +1,7 @@
-"""The render routes on a real `flocklab serve`: pictures of finished jobs, drawn once in a
-child process and then served from the results folder; the result routes' errors and
-auth; the viewer and offline Swagger UI; matplotlib never loaded by the API process."""
+"""The render routes on the real app (in-process; one check on a real `flocklab serve`):
+pictures of finished jobs, drawn once in a child process and then served from the results
+folder; the result routes' errors and auth; the viewer and offline Swagger UI; matplotlib
+never loaded by the API process."""
 
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ def _image(content: bytes) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def done_job(server) -> str:
-    with httpx.Client(base_url=server.url, timeout=30) as http:
+    with server.client(timeout=30) as http:
         job = submit(http, scenario(n=60, steps=40, every=5))
         assert wait_for(http, job["id"])["status"] == "succeeded"
     return job["id"]
@@ -64,7 +65,7 @@ def done_job_3d(server) -> str:
     """A finished 3D Vicsek job (the periodic cube)."""
     sc = scenario(n=80, steps=30, every=5)
     sc["space"]["dimension"] = 3
-    with httpx.Client(base_url=server.url, timeout=30) as http:
+    with server.client(timeout=30) as http:
         job = submit(http, sc)
         assert wait_for(http, job["id"])["status"] == "succeeded"
     return job["id"]
@@ -84,7 +85,7 @@ def test_a_3d_job_is_drawn(server, http, done_job_3d):
                  timeout=300)
     assert r.status_code == 200, r.text
     assert r.headers["content-type"] == "video/mp4" and r.content[4:8] == b"ftyp"
-    with clients.Client(server.url) as c:
+    with clients.Client(server.url, transport=server.transport) as c:
         content = c.job(done_job_3d).snapshot(width=200, height=200, field="density")
         assert _image(content).shape[:2] == (200, 200)
 
@@ -138,7 +139,7 @@ def test_results_deleted_while_drawing_answer_410(server, http):
 
 
 def test_client_snapshot(server, done_job, tmp_path):
-    with clients.Client(server.url) as c:
+    with clients.Client(server.url, transport=server.transport) as c:
         job = c.job(done_job)
         content = job.snapshot(width=256, height=256, field="arrows", trails=0)
         assert isinstance(content, bytes) and _image(content).shape[:2] == (256, 256)
@@ -149,10 +150,10 @@ def test_client_snapshot(server, done_job, tmp_path):
         assert exc.value.errors[0]["loc"] == "query.frame"
 
 
-def test_render_routes_need_the_api_key(make_server):
-    s = make_server({"FLOCKLAB_API_KEY": "s3cret"})
+def test_render_routes_need_the_api_key(make_app):
+    s = make_app({"FLOCKLAB_API_KEY": "s3cret"})
     key = {"X-API-Key": "s3cret"}
-    with httpx.Client(base_url=s.url, timeout=120) as http:
+    with s.client(timeout=120) as http:
         job = submit(http, scenario(n=30, steps=10, every=5), headers=key)
         deadline = time.monotonic() + 60
         while http.get(f"/v1/jobs/{job['id']}", headers=key).json()["status"] != "succeeded":
@@ -187,10 +188,14 @@ def test_viewer_and_offline_api_docs(http):
             assert b"cdn.redoc.ly" not in got.content
 
 
-def test_api_process_never_loads_plotting_or_the_engine(server, http, done_job):
+def test_api_process_never_loads_plotting_or_the_engine(real_server, real_http):
     """After drawing, the API process has mapped none of matplotlib's or Taichi's
     compiled modules (`import matplotlib` / `import taichi` load them): the drawing ran in
-    a child process."""
+    a child process (a real `flocklab serve`: the test process has loaded both)."""
+    http, server = real_http, real_server
+    job = submit(http, scenario(n=60, steps=40, every=5))
+    assert wait_for(http, job["id"])["status"] == "succeeded"
+    done_job = job["id"]
     r = http.get(f"/v1/jobs/{done_job}/render/snapshot.png", params={"width": 128,
                                                                       "height": 128},
                  timeout=120)

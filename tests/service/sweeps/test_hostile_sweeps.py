@@ -15,28 +15,27 @@ from typing import Any
 import httpx
 import pytest
 
-from flocklab.service.serve import ServerProcess
-from tests.service.conftest import _cleanup
+from tests.service.inproc import InProcessServer
 from tests.service.svc_helpers import assert_problem, scenario, wait_for
 from tests.service.svc_helpers import submit as submit_job
 from tests.service.sweeps.test_sweeps import SWEEP_ENV, _worker_pids, submit, sweep_spec, wait_sweep
 
 
 @pytest.fixture(scope="module")
-def hostile_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+def hostile_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
     # Bodies up to 4 MiB: room for the 1.1 MB attack body.
     env = {**SWEEP_ENV, "FLOCKLAB_MAX_BODY_BYTES": str(4 * 2**20),
            "FLOCKLAB_MAX_JSON_BYTES": str(4 * 2**20)}
-    s = ServerProcess(tmp_path_factory.mktemp("hostile") / "data", env=env).start()
+    s = InProcessServer(tmp_path_factory.mktemp("hostile") / "data", env=env).start()
     try:
         yield s
     finally:
-        _cleanup(s)
+        s.stop()
 
 
 @pytest.fixture
-def http(hostile_server: ServerProcess) -> Iterator[httpx.Client]:
-    with httpx.Client(base_url=hostile_server.url, timeout=60) as c:
+def http(hostile_server: InProcessServer) -> Iterator[httpx.Client]:
+    with hostile_server.client(timeout=60) as c:
         yield c
 
 
@@ -67,7 +66,7 @@ def test_a_replicas_axis_runs(http: httpx.Client):
 
 
 def test_b_no_server_path_in_the_sweep_plots_problem(http: httpx.Client,
-                                                     hostile_server: ServerProcess):
+                                                     hostile_server: InProcessServer):
     """Plotting a sweep without axes answered 422 "<the results folder>: the sweep has no
     rows or no axes", the server's data path in the body."""
     pytest.importorskip("matplotlib")
@@ -179,23 +178,23 @@ def test_f_many_axes_answered_in_under_a_second(http: httpx.Client):
 
 
 @pytest.fixture(scope="module")
-def long_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+def long_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
     """Runs of 0.2-0.6 s (N = 1000, 3000 steps), one worker: a sweep of 12 lasts seconds."""
     env = {**SWEEP_ENV, "FLOCKLAB_MAX_SWEEP_AGENT_STEPS": "50000000"}
-    s = ServerProcess(tmp_path_factory.mktemp("hostile-long") / "data", env=env).start()
+    s = InProcessServer(tmp_path_factory.mktemp("hostile-long") / "data", env=env).start()
     try:
         yield s
     finally:
-        _cleanup(s)
+        s.stop()
 
 
-def _kill_worker(server: ServerProcess) -> None:
+def _kill_worker(server: InProcessServer) -> None:
     workers = _worker_pids(server)
     assert len(workers) == 1
     os.kill(workers[0], signal.SIGKILL)
 
 
-def _assert_runs_kept(http: httpx.Client, server: ServerProcess, done: dict[str, Any]
+def _assert_runs_kept(http: httpx.Client, server: InProcessServer, done: dict[str, Any]
                       ) -> None:
     """The sweep's finished runs are its results, each once, in the journal and tables."""
     assert done["results"] == "available", done
@@ -212,10 +211,10 @@ def _assert_runs_kept(http: httpx.Client, server: ServerProcess, done: dict[str,
     assert sum(row[count] for row in table["data"]) == len(completed)
 
 
-def test_k_a_second_worker_loss_keeps_the_finished_runs(long_server: ServerProcess):
+def test_k_a_second_worker_loss_keeps_the_finished_runs(long_server: InProcessServer):
     """Losing the worker on the last allowed attempt failed the sweep and deleted every
     run it had finished."""
-    with httpx.Client(base_url=long_server.url, timeout=60) as http:
+    with long_server.client(timeout=60) as http:
         created = submit(http, sweep_spec(etas=(0.5, 1.0, 2.0, 3.0), replicas=3, n=1000,
                                           steps=3000, name="lost-twice"))
         first = wait_sweep(http, created["id"], until=lambda s: s["runs_done"] >= 2)
@@ -229,10 +228,10 @@ def test_k_a_second_worker_loss_keeps_the_finished_runs(long_server: ServerProce
         _assert_runs_kept(http, long_server, done)
 
 
-def test_k_a_cancel_then_a_worker_death_keeps_the_finished_runs(long_server: ServerProcess):
+def test_k_a_cancel_then_a_worker_death_keeps_the_finished_runs(long_server: InProcessServer):
     """A cancel followed by the worker's death (before it wrote its tables) deleted the
     runs the sweep had finished."""
-    with httpx.Client(base_url=long_server.url, timeout=60) as http:
+    with long_server.client(timeout=60) as http:
         created = submit(http, sweep_spec(etas=(0.5, 1.0, 2.0, 3.0), replicas=3, n=1000,
                                           steps=3000, name="cancel-kill"))
         wait_sweep(http, created["id"], until=lambda s: s["runs_done"] >= 1)

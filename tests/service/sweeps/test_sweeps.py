@@ -1,4 +1,4 @@
-"""Sweeps over HTTP on a real server (127.0.0.1, real SQLite store, real spawned workers):
+"""Sweeps over HTTP on the real app (in-process: real SQLite store, real spawned workers):
 the table equals the local runner's, progress over SSE, cancel, limits and bad input as
 problem+json, idempotency, and a worker killed mid-sweep."""
 
@@ -16,7 +16,8 @@ import httpx
 import pytest
 
 from flocklab.service.serve import ServerProcess
-from tests.service.conftest import TEST_ENV, _cleanup
+from tests.service.conftest import TEST_ENV
+from tests.service.inproc import InProcessServer
 from tests.service.svc_helpers import assert_problem
 
 # Small sweep limits to test against: 12 runs, 10^6 agent-steps.
@@ -48,36 +49,36 @@ def sweep_spec(etas: tuple[float, ...] = (0.5, 2.0), replicas: int = 2, n: int =
 
 
 @pytest.fixture(scope="module")
-def sweep_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    s = ServerProcess(tmp_path_factory.mktemp("sweeps") / "data", env=SWEEP_ENV).start()
+def sweep_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
+    s = InProcessServer(tmp_path_factory.mktemp("sweeps") / "data", env=SWEEP_ENV).start()
     try:
         yield s
     finally:
-        _cleanup(s)
+        s.stop()
 
 
 @pytest.fixture(scope="module")
-def long_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+def long_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
     """A server admitting runs long enough (0.1-0.3 s each) to cancel or kill a sweep in
     the middle: on the fused path a whole sweep within SWEEP_ENV's 10^6 agent-steps takes
     about 0.1 s, less than a poll can be sure to catch."""
     env = {**SWEEP_ENV, "FLOCKLAB_MAX_SWEEP_AGENT_STEPS": "20000000"}
-    s = ServerProcess(tmp_path_factory.mktemp("long") / "data", env=env).start()
+    s = InProcessServer(tmp_path_factory.mktemp("long") / "data", env=env).start()
     try:
         yield s
     finally:
-        _cleanup(s)
+        s.stop()
 
 
 @pytest.fixture
-def long_http(long_server: ServerProcess) -> Iterator[httpx.Client]:
-    with httpx.Client(base_url=long_server.url, timeout=30) as c:
+def long_http(long_server: InProcessServer) -> Iterator[httpx.Client]:
+    with long_server.client(timeout=30) as c:
         yield c
 
 
 @pytest.fixture
-def http(sweep_server: ServerProcess) -> Iterator[httpx.Client]:
-    with httpx.Client(base_url=sweep_server.url, timeout=30) as c:
+def http(sweep_server: InProcessServer) -> Iterator[httpx.Client]:
+    with sweep_server.client(timeout=30) as c:
         yield c
 
 
@@ -278,7 +279,7 @@ def test_idempotency_key(http: httpx.Client):
     wait_sweep(http, first["id"])
 
 
-def _worker_pids(server: ServerProcess) -> list[int]:
+def _worker_pids(server: InProcessServer | ServerProcess) -> list[int]:
     pids = []
     for pid in server.children():
         try:
@@ -290,7 +291,7 @@ def _worker_pids(server: ServerProcess) -> list[int]:
 
 
 def test_worker_killed_mid_sweep_resumes_without_redoing_runs(
-        long_http: httpx.Client, long_server: ServerProcess):
+        long_http: httpx.Client, long_server: InProcessServer):
     http = long_http
     created = submit(http, sweep_spec(etas=(0.5, 1.5, 3.0), replicas=3, n=1000, steps=1500,
                                       name="killed"))
