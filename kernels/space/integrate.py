@@ -11,10 +11,14 @@ in the order above, so y1 has the same bits as the formula written out.
 The double integrator dr/dt = v, dv/dt = u(r, v) of M2/M3 (paper 000 eq. 1) is the pair
 y = (r, v), f = (v, u), moved by the `_pair` kernels (one launch for both arrays: a small
 run's step is mostly launches): its position stage takes the stage velocity as k and reads
-it before the velocity stage moves it. M4's single integrator r' = u(r) is one array.
+it before the velocity stage moves it; `rk4_pair_step` is that step of a family's u (flocking,
+Cucker–Smale). M4's single integrator r' = u(r) is one array.
 Semi-implicit Euler, the default, is fused into the force kernels of each family;
 `nonfinite` is their test of a step's result.
 """
+
+from collections.abc import Callable
+from typing import Any
 
 import taichi as ti
 
@@ -125,3 +129,17 @@ def gather_rows(src: nd, dst: nd, perm: nd):
     for i in range(dst.shape[0]):
         for m in range(src.shape[1]):
             dst[i, m] = src[perm[i], m]
+
+
+def rk4_pair_step(x0, v0, b: dict, h: float, accel: Callable[[Any, Any, Any, bool], None],
+                  r_out, v_out, bad) -> None:
+    """One classical RK4 step of (r, v)' = (v, u(r, v)) into (r_out, v_out), in place of
+    the state (x0, v0): k1 at the state, then the stages at h/2, h/2 and h, weights
+    1, 2, 2, 1. `accel(pos, vel, out, at_state)` writes u; `b` holds the stage buffers
+    xs, xk, vs, vk and a (rk4_begin_pair / rk4_stage_pair / rk4_finish_pair)."""
+    rk4_begin_pair(x0, b["xs"], b["xk"], v0, b["vs"], b["vk"])
+    accel(x0, v0, b["a"], True)
+    for w, c in ((1.0, h / 2), (2.0, h / 2), (2.0, h)):
+        rk4_stage_pair(x0, b["xs"], b["xk"], v0, b["vs"], b["vk"], b["a"], w, c)
+        accel(b["xs"], b["vs"], b["a"], False)
+    rk4_finish_pair(x0, b["xk"], v0, b["vs"], b["vk"], b["a"], h / 6, r_out, v_out, bad)

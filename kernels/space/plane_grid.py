@@ -24,7 +24,16 @@ from .. import runtime
 from ..result import SimulationDiverged
 from ..runtime import DevicePolicy
 from .blocks import dense_row_start, grid_row
-from .grid import Grid, bbox_buffer, bounding_box, max_cells_across, row, space_cell, widen
+from .grid import (
+    Grid,
+    bbox_buffer,
+    bounding_box,
+    make_visitor,
+    max_cells_across,
+    row,
+    space_cell,
+    widen,
+)
 
 nd = ti.types.ndarray()
 CELLS_PER_AGENT = 4
@@ -190,3 +199,26 @@ class PlaneGrid:
 
     def view(self) -> tuple:
         return self._current().view()
+
+
+def make_all_pairs_visitor(pair):
+    """grid.make_visitor's interface, folding `pair` over every agent k (no grid: O(N^2),
+    for small N, where rebuilding a grid costs more than the pairs)."""
+
+    @ti.func
+    def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
+              periodic: ti.template()):
+        for k in range(pos.shape[0]):
+            acc = pair(i, k, row(pos, k, xi.n) - xi, acc, S)
+        return acc
+
+    return visit
+
+
+def visitor(pair, search: str, dim: int = 2):
+    """The neighbour loop for a search: all pairs, the engine's hashed grid or a DenseGrid."""
+    if search == "hash":
+        return make_visitor(pair, dim=dim)
+    if search == "dense":
+        return make_dense_visitor(pair, dim)
+    return make_all_pairs_visitor(pair)

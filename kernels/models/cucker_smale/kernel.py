@@ -19,7 +19,7 @@ from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real
 from ...space.initial import initial_state, unit_rows
-from ...space.integrate import gather_rows, rk4_begin_pair, rk4_finish_pair, rk4_stage_pair
+from ...space.integrate import gather_rows, rk4_pair_step
 from ...space.plane_grid import PlaneGrid
 from ...space.state import SortedState, permute_all
 from . import law
@@ -84,15 +84,9 @@ class CuckerSmaleKernel(ModelKernel):
         st.swap("vel")
 
     def _rk4_step(self, step: int, pos_out: ti.Ndarray, vel_out: ti.Ndarray) -> None:
-        b, h = self.rk4, self.scenario.time.dt
-        x0, v0 = self.state["pos"], self.state["vel"]
-        rk4_begin_pair(x0, b["xs"], b["xk"], v0, b["vs"], b["vk"])
-        self._accel(x0, v0, b["a"], step, at_state=True)
-        for w, c in ((1.0, h / 2), (2.0, h / 2), (2.0, h)):
-            rk4_stage_pair(x0, b["xs"], b["xk"], v0, b["vs"], b["vk"], b["a"], w, c)
-            self._accel(b["xs"], b["vs"], b["a"], step, at_state=False)
-        rk4_finish_pair(x0, b["xk"], v0, b["vs"], b["vk"], b["a"], h / 6, pos_out, vel_out,
-                        self.bad)
+        rk4_pair_step(self.state["pos"], self.state["vel"], self.rk4, self.scenario.time.dt,
+                      lambda x, v, out, at_state: self._accel(x, v, out, step, at_state),
+                      pos_out, vel_out, self.bad)
 
     def _accel(self, pos: ti.Ndarray, vel: ti.Ndarray, out: ti.Ndarray, step: int,
                at_state: bool) -> None:

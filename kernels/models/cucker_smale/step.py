@@ -13,25 +13,12 @@ from functools import cache
 
 import taichi as ti
 
-from ...space.grid import make_visitor, put, row
+from ...space.grid import put, row
 from ...space.integrate import nonfinite
-from ...space.plane_grid import make_dense_visitor
+from ...space.plane_grid import visitor
 from . import law
 
 nd = ti.types.ndarray()
-
-
-def _all_pairs(pair):
-    """The grid visitor's interface over every agent (O(N^2), no grid)."""
-
-    @ti.func
-    def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
-              periodic: ti.template()):
-        for k in range(pos.shape[0]):
-            acc = pair(i, k, row(pos, k, xi.n) - xi, acc, S)
-        return acc
-
-    return visit
 
 
 @cache
@@ -44,8 +31,7 @@ def step_kernels(dim: int, search: str, local: bool):
         # S = (vel, q, v_i): q and v_i are the agent's values, read once, not per pair.
         return law.pair_term(acc, d, row(S[0], k, dim), S[2], S[1])
 
-    visit = (_all_pairs(pair) if search == "all_pairs" else make_visitor(pair, dim=dim)
-             if search == "hash" else make_dense_visitor(pair, dim))
+    visit = visitor(pair, search, dim)
 
     @ti.func
     def accel_of(i, pos: ti.template(), vel: ti.template(), prm: ti.template(),

@@ -24,10 +24,10 @@ import taichi as ti
 
 from ...space.blocks import make_cell_pass, make_sieved_visitor, n_cells
 from ...space.graph import find, link
-from ...space.grid import make_visitor, put, row, within
+from ...space.grid import put, row, within
 from ...space.integrate import nonfinite
 from ...space.params import Slots
-from ...space.plane_grid import make_dense_visitor
+from ...space.plane_grid import visitor
 from . import law, potentials
 from .law import MIN, OWN
 from .navigation import make_navigation
@@ -49,29 +49,6 @@ def pair_radius2(rule: ti.template(), i, k, rad: ti.template(), prm: ti.template
         r = ti.min(rad[i], rad[k])
         r2 = r * r
     return r2
-
-
-def make_all_pairs_visitor(pair):
-    """grid.make_visitor's interface, folding `pair` over every agent k (no grid: O(N^2),
-    for small N, where rebuilding a grid costs more than the pairs)."""
-
-    @ti.func
-    def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
-              periodic: ti.template()):
-        for k in range(pos.shape[0]):
-            acc = pair(i, k, row(pos, k, xi.n) - xi, acc, S)
-        return acc
-
-    return visit
-
-
-def visitor(pair, search: str, dim: int = 2):
-    """The neighbour loop for a search: all pairs, the engine's hashed grid or a DenseGrid."""
-    if search == "hash":
-        return make_visitor(pair, dim=dim)
-    if search == "dense":
-        return make_dense_visitor(pair, dim)
-    return make_all_pairs_visitor(pair)
 
 
 @cache
