@@ -100,13 +100,15 @@ def kill_and_resume(scenario: Path, out: Path, path: str, seed: int, kills: int)
                 break
             time.sleep(0.02)
         time.sleep(rng.uniform(0.0, 0.8))  # a random moment: mid-step, mid-frame, mid-write
-        if proc.poll() is None:
-            hit += 1
+        running = proc.poll() is None
         proc.send_signal(signal.SIGKILL)
         _, err = proc.communicate()
         assert proc.returncode in (0, -signal.SIGKILL), err.decode()
-        if proc.returncode == 0:
+        # Ended before the kill, or killed on its way out with its folder complete: that
+        # kill hit no running run, and there is nothing left to resume.
+        if proc.returncode == 0 or (out / "summary.json").exists():
             return hit
+        hit += running
         args = ["run", "--resume", str(out), "--quiet"]
     done = subprocess.run(flocklab(*args), capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
