@@ -89,6 +89,7 @@ MODULES = {
     "flocking_obstacles": "flocklab.kernels.models.flocking.obstacles",
     "formation": "flocklab.kernels.models.formation.kernel",
     "cucker_smale": "flocklab.kernels.models.cucker_smale.kernel",
+    "couzin": "flocklab.kernels.models.couzin.kernel",
 }
 
 

@@ -8,6 +8,8 @@ from pydantic import Field
 
 from . import vicsek_presets  # noqa: F401  (registers the M1 presets)
 from .catalog import MODELS
+from .couzin import CouzinParams  # noqa: F401  (registers Couzin)
+from .couzin_presets import couzin_2002_torus  # noqa: F401  (its presets)
 from .cucker_smale import CuckerSmaleParams  # noqa: F401  (registers Cucker-Smale)
 from .cucker_smale_presets import cucker_smale_2007  # noqa: F401  (its preset)
 from .flocking import FlockingParams  # noqa: F401  (registers M2)
