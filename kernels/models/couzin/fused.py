@@ -34,6 +34,7 @@ from ...space.cells import SPREAD
 from ...space.integrate import nonfinite
 from ...space.params import Slots
 from . import law
+from .start import directions
 
 nd = ti.types.ndarray()
 FUSED_MAX_N = 1024
@@ -132,8 +133,6 @@ class CouzinBatch(FusedBatch):
     CHECKPOINTS = True  # the whole state is in `args`
 
     def __init__(self, scenarios: list[Scenario]):
-        from .kernel import directions
-
         self.scenarios = scenarios
         self.dim = dim = scenarios[0].dimension
         self.kernel = advance_kernel(dim)

@@ -16,23 +16,13 @@ from flocklab.schemas import Scenario
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real
-from ...space.initial import initial_state
 from ...space.plane_grid import PlaneGrid
 from ...space.state import SortedState
 from . import law
 from .fused import CouzinBatch
 from .observe import observe
+from .start import directions
 from .step import step_kernel
-
-
-def directions(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """The initial positions and unit directions (2D: of the headings; 3D: uniform on the
-    sphere, or the explicit velocities' directions)."""
-    init = initial_state(scenario)
-    if scenario.dimension == 3:
-        return init.positions, init.directions
-    th = init.headings
-    return init.positions, np.stack([np.cos(th), np.sin(th)], axis=1)
 
 
 @register_kernel
