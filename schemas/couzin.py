@@ -8,7 +8,8 @@ Agent i at c_i with unit direction d_i, r_ij = c_j - c_i, r = |r_ij|, j != i:
 with r_o = r_r + dr_o, r_a = r_o + dr_a; "seen": j outside the blind cone behind i, the
 angle between d_i and r_ij at most field_of_view / 2. Any neighbour in the zone of
 repulsion: d = d_r (repulsion alone decides). Else d = (d_o + d_a) / 2 when both zones
-hold someone, the one that does otherwise, d_i itself when none does (or d sums to 0).
+hold someone (`combine: "unit"`: of d_o / |d_o| and d_a / |d_a|), the one that does
+otherwise, d_i itself when none does (or d sums to 0).
 Then d / |d| is rotated by a wrapped Gaussian angle of s.d. sigma (2D: about the normal;
 3D: towards a uniform random direction normal to d), and d_i turns towards it by at most
 theta tau (the turning rate times the time step): d_i' = d when the angle between them is
@@ -75,6 +76,11 @@ class CouzinParams(ModelParams):
                                        "at most theta * dt per step (paper: 40, tau = 0.1 s).")
     speed: PositiveReal = Field(default=3.0, description="s (length per second): every "
                                 "agent's speed (paper: 3).")
+    combine: Literal["sum", "unit"] = Field(
+        default="sum",
+        description="How d_o and d_a are averaged when both zones hold someone: sum: "
+        "(d_o + d_a)/2 of the sums as eqs. 2-3 write them (each partner weighs one); "
+        "unit: (d_o/|d_o| + d_a/|d_a|)/2 (each zone weighs one).")
     sigma: NonNegativeReal = Field(default=0.05, description="sigma (radians): the s.d. of "
                                    "the wrapped-Gaussian rotation of the desired direction "
                                    "(paper: 0.05).")

@@ -9,8 +9,9 @@ r = |r_ij| > 0; a partner at r = 0, i itself included, has no direction and is s
   r_r <= r < r_o, e_i.r_ij >= c r   acc_o += (e_j, 1)                 (eq. 2)
   r_o <= r < r_a, e_i.r_ij >= c r   acc_a += (r_ij / r, 1)            (eq. 3)
 with c = cos(field_of_view / 2) (the blind cone behind i is not seen; repulsion sees all).
-  d = acc_r if any repulsion partner, else (d_o + d_a) / 2 if both, else the one present,
-      else e_i; d = e_i also when it sums to zero;  d <- d / |d|
+  d = acc_r if any repulsion partner, else (d_o + d_a) / 2 if both (combine "unit": of
+      d_o / |d_o| and d_a / |d_a|), else the one present, else e_i; d = e_i also when it
+      sums to zero;  d <- d / |d|
   noise: g = sigma sqrt(-2 ln(1 - u1)) cos(2 pi u2) (Box-Muller), d rotated by g (2D:
       counter-clockwise; 3D: towards b = cos(2 pi u3) b1 + sin(2 pi u3) b2, (b1, b2) an
       orthonormal frame normal to d from the axis least aligned with d)
@@ -30,8 +31,9 @@ from ...space import rng
 from ...space.params import Slots
 
 # Runtime parameters: r_r^2, r_o^2, r_a^2, cos(alpha / 2) (-2 at alpha = 360: every
-# partner seen, whatever the rounding), s tau, cos and sin of theta tau, sigma.
-P = Slots("RR2", "RO2", "RA2", "COS_VIEW", "STEP", "COS_TURN", "SIN_TURN", "SIGMA")
+# partner seen, whatever the rounding), s tau, cos and sin of theta tau, sigma, 1 when
+# d_o and d_a are made unit vectors before they are averaged (`combine: "unit"`).
+P = Slots("RR2", "RO2", "RA2", "COS_VIEW", "STEP", "COS_TURN", "SIN_TURN", "SIGMA", "UNIT")
 STREAMS = 3  # u1, u2 (the Gaussian), u3 (3D: the rotation's azimuth)
 ACC = 3  # zone sums: repulsion, orientation, attraction, each (vector, count)
 DIVERGED_CAUSE = "a position or direction became non-finite"
@@ -43,7 +45,7 @@ def parameters(p, dt: float) -> np.ndarray:
     view = -2.0 if p.field_of_view >= 360.0 else math.cos(math.radians(p.field_of_view) / 2)
     return P.pack(RR2=p.r_r ** 2, RO2=p.r_o ** 2, RA2=p.r_a ** 2, COS_VIEW=view,
                   STEP=p.speed * dt, COS_TURN=math.cos(turn), SIN_TURN=math.sin(turn),
-                  SIGMA=p.sigma)
+                  SIGMA=p.sigma, UNIT=float(p.combine == "unit"))
 
 
 def step_keys(seed: int, step: int) -> np.ndarray:
@@ -93,7 +95,16 @@ def _block(acc, b: ti.template(), dim: ti.template()):
 
 
 @ti.func
-def desired(acc, ei):
+def _unit_or_zero(v):
+    n2 = v.dot(v)
+    out = v
+    if n2 > 0.0:
+        out = v / ti.sqrt(n2)
+    return out
+
+
+@ti.func
+def desired(acc, ei, q):
     """The desired direction d / |d| from the zone sums (e_i when there is none)."""
     dim = ti.static(ei.n)
     w = ti.static(dim + 1)
@@ -101,7 +112,12 @@ def desired(acc, ei):
     if acc[dim] > 0.0:
         d = _block(acc, 0, dim)
     elif acc[w + dim] > 0.0 and acc[2 * w + dim] > 0.0:
-        d = 0.5 * (_block(acc, 1, dim) + _block(acc, 2, dim))
+        do = _block(acc, 1, dim)
+        da = _block(acc, 2, dim)
+        if q[P.UNIT] != 0.0:  # each zone's pull counts once, not once per partner
+            do = _unit_or_zero(do)
+            da = _unit_or_zero(da)
+        d = 0.5 * (do + da)
     elif acc[w + dim] > 0.0:
         d = _block(acc, 1, dim)
     elif acc[2 * w + dim] > 0.0:
@@ -163,7 +179,7 @@ def turn(ei, d, q):
 @ti.func
 def agent_step(xi, ei, acc, agent, keys, q):
     """(x_i', e_i') from agent i's zone sums; keys: the step's three noise keys."""
-    d = desired(acc, ei)
+    d = desired(acc, ei, q)
     if q[P.SIGMA] > 0.0:
         u3 = 0.0
         if ti.static(ei.n == 3):

@@ -28,7 +28,7 @@ def frame(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def desired(x: np.ndarray, e: np.ndarray, *, r_r: float, r_o: float, r_a: float,
-            fov_deg: float) -> np.ndarray:
+            fov_deg: float, combine: str = "sum") -> np.ndarray:
     """Each agent's desired unit direction before noise (eqs. 1-3 and the combination)."""
     d = x[None, :, :] - x[:, None, :]  # d[i, j] = x_j - x_i
     r = np.sqrt((d**2).sum(axis=-1))
@@ -48,6 +48,9 @@ def desired(x: np.ndarray, e: np.ndarray, *, r_r: float, r_o: float, r_a: float,
     out[ha] = da[ha]
     out[ho] = do[ho]
     both = ho & ha
+    if combine == "unit":
+        do = do / np.where(ho, np.linalg.norm(do, axis=1), 1.0)[:, None]
+        da = da / np.where(ha, np.linalg.norm(da, axis=1), 1.0)[:, None]
     out[both] = 0.5 * (do[both] + da[both])
     out[hr] = dr[hr]
     n = np.linalg.norm(out, axis=1)
@@ -57,11 +60,12 @@ def desired(x: np.ndarray, e: np.ndarray, *, r_r: float, r_o: float, r_a: float,
 
 def step(x: np.ndarray, e: np.ndarray, *, seed: int, step_no: int, r_r: float, dr_o: float,
          dr_a: float, field_of_view: float, turning_rate: float, speed: float, sigma: float,
-         dt: float) -> tuple[np.ndarray, np.ndarray]:
+         dt: float, combine: str = "sum") -> tuple[np.ndarray, np.ndarray]:
     """One synchronous step of every agent (x, e in agent-id order)."""
     n, dim = x.shape
     r_o = r_r + dr_o
-    d = desired(x, e, r_r=r_r, r_o=r_o, r_a=r_o + dr_a, fov_deg=field_of_view)
+    d = desired(x, e, r_r=r_r, r_o=r_o, r_a=r_o + dr_a, fov_deg=field_of_view,
+                combine=combine)
     if sigma > 0:
         ids = np.arange(n)
         u1, u2, u3 = (uniform_np(step_key(seed, s, step_no), ids) for s in range(3))

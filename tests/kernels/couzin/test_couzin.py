@@ -58,7 +58,8 @@ def run(sc: Scenario, path: str):
 def params(sc: Scenario) -> dict:
     p = sc.model
     return dict(r_r=p.r_r, dr_o=p.dr_o, dr_a=p.dr_a, field_of_view=p.field_of_view,
-                turning_rate=p.turning_rate, speed=p.speed, sigma=p.sigma, dt=sc.time.dt)
+                turning_rate=p.turning_rate, speed=p.speed, sigma=p.sigma, dt=sc.time.dt,
+                combine=p.combine)
 
 
 CASES = {  # zones that split a box of side 5 between all three; a wide turn, so the
@@ -66,8 +67,8 @@ CASES = {  # zones that split a box of side 5 between all three; a wide turn, so
     "paper": dict(r_r=1.0, dr_o=1.0, dr_a=1.5, turning_rate=300.0),
     "noiseless-360": dict(r_r=0.8, dr_o=0.7, dr_a=2.0, field_of_view=360.0, sigma=0.0,
                           turning_rate=500.0),
-    "narrow-view": dict(r_r=0.6, dr_o=1.2, dr_a=1.0, field_of_view=120.0, sigma=0.3,
-                        turning_rate=200.0),
+    "narrow-view-unit": dict(r_r=0.6, dr_o=1.2, dr_a=1.0, field_of_view=120.0, sigma=0.3,
+                             turning_rate=200.0, combine="unit"),
 }
 
 
