@@ -37,7 +37,7 @@ from . import law
 from .start import directions
 
 nd = ti.types.ndarray()
-FUSED_MAX_N = 1024
+FUSED_MAX_N = 512
 IP = Slots("STEPS", "EVERY", "BAD", "NOBS")
 OBS = ("step", "polarization", "milling")
 ARRAYS = ("aoff", "ooff", "prm", "iprm", "kseed", "pos", "ew", "pos2", "ew2", "obs")
