@@ -3,6 +3,7 @@ the four presets' collective states.
 
     python -m bench.small_n_couzin                    # per-step cost at N = 20, 100, 1000
     python -m bench.small_n_couzin --states [--figure OUT.png]   # couzin-2002-* p and m
+    python -m bench.small_n_couzin --memory           # collective memory (hysteresis)
 
 One JSON line per measurement: wall and CPU time (`time.process_time`) per step on each
 schedule and their ratio, with the load average beside them (the machine is shared).
@@ -10,7 +11,11 @@ Scenarios are couzin-2002-torus at N agents (3D; its initial ball grown with N a
 preset's density), observables every 10 steps, no frames, one thread; compile and kernel
 loading excluded by a warm-up run. `--states`: each couzin-2002-* preset on the schedule
 auto picks, a line with its polarization p and milling m at the end and averaged over
-the last 100 s; `--figure` draws p and m against time for the four.
+the last 100 s; `--figure` draws p and m against time for the four. `--memory`: the
+paper's collective memory, Delta r_o stepped up from the torus preset's end state and
+down from the parallel preset's (each value run MEMORY_SECONDS from the state the last
+one ended in, through an explicit initial block), a line per value with p and m averaged
+over its last half.
 """
 
 from __future__ import annotations
@@ -27,6 +32,8 @@ from flocklab.schemas import PRESETS, Scenario
 
 SIZES = [20, 100, 1000]
 STATES = ("swarm", "torus", "dynamic-parallel", "parallel")
+MEMORY_SECONDS = 100.0
+MEMORY_STEPS = [2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 13.0]
 
 
 def preset_like(n: int, steps: int) -> Scenario:
@@ -102,15 +109,56 @@ def states(out: str | None) -> None:
                                                    for s, r in runs.items()}}))
 
 
+def continued(spec: dict, pos: np.ndarray, vel: np.ndarray, dr_o: float) -> Scenario:
+    """spec at Delta r_o = dr_o, starting from (pos, vel), for MEMORY_SECONDS."""
+    spec = copy.deepcopy(spec)
+    spec["model"]["dr_o"] = dr_o
+    spec["initial"] = {"kind": "explicit", "positions": pos.tolist(),
+                       "velocities": vel.tolist()}
+    spec["time"]["steps"] = round(MEMORY_SECONDS / spec["time"]["dt"])
+    spec["recording"] = {"every": spec["time"]["steps"], "arrays": ["position", "velocity"],
+                         "observables_every": 10}
+    return Scenario.model_validate(spec)
+
+
+class Last:
+    """A FrameSink keeping the last frame."""
+
+    def frame(self, step, time, arrays):
+        self.pos = np.array(arrays["position"])
+        self.vel = np.array(arrays["velocity"])
+
+
+def memory() -> None:
+    from flocklab import kernels
+
+    for start, values in (("torus", MEMORY_STEPS), ("parallel", MEMORY_STEPS[::-1])):
+        spec = PRESETS[f"couzin-2002-{start}"].build()
+        spec["recording"] = {"every": spec["time"]["steps"], "arrays": ["position",
+                                                                         "velocity"]}
+        sink = Last()
+        kernels.run(Scenario.model_validate(spec), sink=sink)
+        for dr_o in values:
+            res = kernels.run(continued(spec, sink.pos, sink.vel, dr_o), sink=sink)
+            o = res.observables
+            half = o["time"] >= MEMORY_SECONDS / 2
+            print(json.dumps({"from": start, "dr_o": dr_o,
+                              "p": round(float(o["polarization"][half].mean()), 3),
+                              "m": round(float(o["milling"][half].mean()), 3)}), flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--states", action="store_true", help="run the four state presets")
     ap.add_argument("--figure", metavar="OUT", help="with --states: draw p and m")
+    ap.add_argument("--memory", action="store_true", help="Delta r_o up and down")
     args = ap.parse_args(argv)
     from flocklab.kernels import runtime
 
     runtime.ensure("cpu", threads=1)
-    if args.states:
+    if args.memory:
+        memory()
+    elif args.states:
         states(args.figure)
     else:
         sizes()
