@@ -42,7 +42,8 @@ class CouzinParams(ModelParams):
         "d = (d_o + d_a)/2 when both; blind cone behind (field_of_view); wrapped-Gaussian "
         "noise sigma; turn by at most theta tau; c' = c + s tau d'; order parameters "
         "p = |sum d_i|/N and m = |sum r_ic x d_i|/N (group polarization and angular "
-        "momentum)")
+        "momentum); combine 'unit' averages d_o/|d_o| and d_a/|d_a|. Equation numbers and "
+        "Table 1 values not checked against the paper's text (docs/models/couzin.md)")
     summary: ClassVar[str] = (
         "Zones of repulsion, orientation and attraction with a blind angle, a maximum "
         "turning rate and constant speed: swarm, torus, dynamic and highly parallel groups.")
