@@ -189,7 +189,7 @@ def test_milling_of_a_rotating_ring_is_one():
     definition, on the fused schedule's observation and the reference's)."""
     n = 24
     a = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    pos = 20.0 * np.c_[np.cos(a), np.sin(a)]
+    pos = 5.0 * np.c_[np.cos(a), np.sin(a)]  # compact: the dense grid, as elsewhere
     vel = 3.0 * np.c_[-np.sin(a), np.cos(a)]
     sc = Scenario.model_validate({
         "model": {"kind": "couzin", "r_r": 1.0, "dr_o": 1.0, "dr_a": 1.0},
