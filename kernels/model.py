@@ -89,6 +89,7 @@ MODULES = {
     "flocking_obstacles": "flocklab.kernels.models.flocking.obstacles",
     "formation": "flocklab.kernels.models.formation.kernel",
     "cucker_smale": "flocklab.kernels.models.cucker_smale.kernel",
+    "olfati_saber": "flocklab.kernels.models.olfati_saber.kernel",
 }
 
 
