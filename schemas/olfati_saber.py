@@ -130,7 +130,7 @@ class OlfatiSaberParams(ModelParams):
                                    "velocity feedback.")
     leader: Leader | None = Field(default=None, description="The gamma-agent (Algorithms 2 "
                                   "and 3): q_r(0) and its constant velocity p_r.")
-    obstacles: tuple[Obstacle, ...] = Field(default=(), description="Spheres (2D: discs) "
+    obstacles: list[Obstacle] = Field(default=[], max_length=MAX_OBSTACLES, description="Spheres (2D: discs) "
                                             "and walls, the beta-agents' sources "
                                             "(Algorithm 3).")
     integrator: Literal["semi_implicit_euler"] = Field(
@@ -156,8 +156,6 @@ class OlfatiSaberParams(ModelParams):
             raise ValueError("model.leader: algorithm 1 has no gamma-agent (use 2 or 3)")
         if self.algorithm < 3 and self.obstacles:
             raise ValueError("model.obstacles: only algorithm 3 has beta-agents")
-        if len(self.obstacles) > MAX_OBSTACLES:
-            raise ValueError(f"model.obstacles: at most {MAX_OBSTACLES}")
         for k, o in enumerate(self.obstacles):
             if isinstance(o, Wall) and math.hypot(*o.normal) == 0.0:
                 raise ValueError(f"model.obstacles[{k}].normal must not be zero")

@@ -60,7 +60,8 @@ def olfati_saber_alg2() -> dict:
 @register_preset(
     "olfati-saber-2006-alg3",
     "Olfati-Saber 2006, Algorithm 3: 150 agents follow a virtual leader at (2, 0) "
-    "between two discs and along a wall (beta-agents); no agent touches an obstacle "
+    "through the gap between two discs, a wall below (beta-agents); no agent touches an "
+    "obstacle "
     "(min_obstacle_distance > 0), t = 0..70.",
 )
 def olfati_saber_alg3() -> dict:
@@ -75,9 +76,9 @@ def olfati_saber_alg3() -> dict:
                   "obstacles": [
                       {"kind": "sphere", "centre": [40.0, 20.0], "radius": 10.0},
                       {"kind": "sphere", "centre": [40.0, -20.0], "radius": 10.0},
-                      {"kind": "wall", "point": [0.0, -30.0], "normal": [0.0, 1.0]}]},
+                      {"kind": "wall", "point": [0.0, -45.0], "normal": [0.0, 1.0]}]},
         "space": {"kind": "plane"},
-        "initial": _start(150, [-60.0, -20.0], [-20.0, 20.0]),
+        "initial": _start(150, [-80.0, -40.0], [0.0, 40.0]),
         "time": {"steps": 35000, "dt": 0.002},
         "recording": {"every": 2500, "arrays": ["position", "velocity"],
                       "observables_every": 100},
