@@ -22,7 +22,7 @@ q^ = (I - a a^T) q_i + a a^T y, p^ = (I - a a^T) p_i (Lemma 4).
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
 import pydantic
 from pydantic import Field
@@ -94,7 +94,9 @@ class OlfatiSaberParams(ModelParams):
     default_plots: ClassVar[tuple[str, ...]] = ("deviation_energy", "relative_connectivity",
                                                 "velocity_mismatch")
     details: ClassVar[str] = "docs/models/olfati_saber.md"
-    overlays: ClassVar[tuple[Overlay, ...]] = ("obstacles",)
+    # No overlays: the renderer's obstacle overlay draws discs around a fixed destination
+    # (M3's); here the target is a moving gamma-agent and walls are half-planes.
+    overlays: ClassVar[tuple[Overlay, ...]] = ()
 
     kind: Literal["olfati_saber"] = "olfati_saber"
     algorithm: Literal[1, 2, 3] = Field(
@@ -130,9 +132,9 @@ class OlfatiSaberParams(ModelParams):
                                    "velocity feedback.")
     leader: Leader | None = Field(default=None, description="The gamma-agent (Algorithms 2 "
                                   "and 3): q_r(0) and its constant velocity p_r.")
-    obstacles: list[Obstacle] = Field(default=[], max_length=MAX_OBSTACLES, description="Spheres (2D: discs) "
-                                            "and walls, the beta-agents' sources "
-                                            "(Algorithm 3).")
+    obstacles: list[Obstacle] = Field(
+        default=[], max_length=MAX_OBSTACLES,
+        description="Spheres (2D: discs) and walls, the beta-agents' sources (Algorithm 3).")
     integrator: Literal["semi_implicit_euler"] = Field(
         default="semi_implicit_euler",
         description="semi_implicit_euler: p += dt u(q, p, t); q += dt p (new p).")
@@ -180,13 +182,3 @@ class OlfatiSaberParams(ModelParams):
             if len(v) != ctx.dimension:
                 raise ValueError(f"{name} has {len(v)} coordinates; space.dimension is "
                                  f"{ctx.dimension}")
-
-    def scene(self) -> dict[str, Any]:
-        """The spheres (discs) and, as the destination, the leader's start (walls are not
-        drawn)."""
-        if not self.obstacles or self.leader is None:
-            return {}
-        spheres = [o for o in self.obstacles if isinstance(o, Sphere)]
-        return {"disc_centres": [list(o.centre) for o in spheres],
-                "disc_radii": [o.radius for o in spheres],
-                "destination": list(self.leader.position)}
