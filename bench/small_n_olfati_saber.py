@@ -80,13 +80,13 @@ def figure(out: str) -> None:
 
     names = ["olfati-saber-2006-alg1", "olfati-saber-2006-alg2", "olfati-saber-2006-alg3"]
     fig, ax = plt.subplots(3, 1, figsize=(6.4, 7.2), sharex=False)
-    for name in names:
+    for colour, name in enumerate(names):
         sc = get_preset(name)
         res = kernels.run(sc)
         o = res.observables
         t = o["time"]
-        ax[0].semilogy(t, o["deviation_energy"], label=name)
-        ax[1].plot(t, o["relative_connectivity"], label=name)
+        ax[0].semilogy(t, o["deviation_energy"], f"C{colour}", label=name)
+        ax[1].plot(t, o["relative_connectivity"], f"C{colour}", label=name)
         line = {"preset": name, "path": res.extra["engine_path"], "N": sc.n_agents,
                 "t_end": float(t[-1])}
         for k in ("deviation_energy", "relative_connectivity", "velocity_mismatch",
@@ -94,7 +94,7 @@ def figure(out: str) -> None:
             if k in o:
                 line[k] = float(o[k][-1])
         if "min_obstacle_distance" in o:
-            ax[2].plot(t, o["min_obstacle_distance"], label=name)
+            ax[2].plot(t, o["min_obstacle_distance"], f"C{colour}", label=name)
             line["min_obstacle_distance_min"] = float(o["min_obstacle_distance"].min())
         print(json.dumps(line), flush=True)
     ax[0].set_ylabel("deviation energy")
