@@ -30,8 +30,11 @@ import taichi as ti
 from ...space.grid import within
 from ...space.params import Slots
 
-P = Slots("EPS", "R2", "RA", "DA", "HA", "PHI_S", "PHI_O", "PHI_C", "C1A", "C2A", "C1B",
-          "C2B", "C1G", "C2G", "DB", "RB2", "HB", "D", "DT", QR=3, PR=3)
+# The divisions of the pair term by constants are multiplications by their reciprocals,
+# computed once here: 1/eps, 1/r_a, pi/(1 - h) (a third of the pair's divisions).
+P = Slots("EPS", "INV_EPS", "R2", "INV_RA", "DA", "HA", "KA", "PHI_S", "PHI_O", "PHI_C",
+          "C1A", "C2A", "C1B", "C2B", "C1G", "C2G", "INV_DB", "DB", "RB2", "HB", "KB", "D",
+          "DT", QR=3, PR=3)
 OBST_WIDTH = 8  # kind, y (3), R, a (3)
 DIVERGED_CAUSE = "dt too large for the lattice's stiffness and the gains"
 
@@ -49,12 +52,15 @@ def parameters(p, dt: float) -> np.ndarray:
     if p.leader is not None:
         qr[:len(p.leader.position)] = p.leader.position
         pr[:len(p.leader.velocity)] = p.leader.velocity
-    prm = P.pack(EPS=eps, R2=p.r * p.r, RA=sigma_norm(p.r, eps), DA=sigma_norm(p.d, eps),
-                 HA=p.h_alpha, PHI_S=(p.a + p.b) / 2, PHI_O=(p.a - p.b) / 2,
+    db = sigma_norm(p.d_obstacle, eps)
+    prm = P.pack(EPS=eps, INV_EPS=1.0 / eps, R2=p.r * p.r, INV_RA=1.0 / sigma_norm(p.r, eps),
+                 DA=sigma_norm(p.d, eps), HA=p.h_alpha, KA=math.pi / (1.0 - p.h_alpha),
+                 PHI_S=(p.a + p.b) / 2, PHI_O=(p.a - p.b) / 2,
                  PHI_C=abs(p.a - p.b) / math.sqrt(4 * p.a * p.b), C1A=p.c1_alpha,
                  C2A=p.c2_alpha, C1B=p.c1_beta, C2B=p.c2_beta, C1G=p.c1_gamma,
-                 C2G=p.c2_gamma, DB=sigma_norm(p.d_obstacle, eps),
-                 RB2=(p.kappa_obstacle * p.d_obstacle) ** 2, HB=p.h_beta, D=p.d, DT=dt)
+                 C2G=p.c2_gamma, INV_DB=1.0 / db, DB=db,
+                 RB2=(p.kappa_obstacle * p.d_obstacle) ** 2, HB=p.h_beta,
+                 KB=math.pi / (1.0 - p.h_beta), D=p.d, DT=dt)
     prm[P.QR:P.QR + 3] = qr
     prm[P.PR:P.PR + 3] = pr
     return prm
@@ -84,14 +90,14 @@ def load(prm: ti.template()):
 
 
 @ti.func
-def bump(z, h):
-    """rho_h(z) (eq. 10): 1 on [0, h), (1 + cos(pi (z - h) / (1 - h))) / 2 on [h, 1], 0
-    beyond; z >= 0 here."""
+def bump(z, h, k):
+    """rho_h(z) (eq. 10): 1 on [0, h), (1 + cos(k (z - h))) / 2 on [h, 1], 0 beyond, with
+    k = pi / (1 - h); z >= 0 here."""
     res = 0.0
     if z < h:
         res = 1.0
     elif z <= 1.0:
-        res = 0.5 * (1.0 + ti.cos(math.pi * (z - h) / (1.0 - h)))
+        res = 0.5 * (1.0 + ti.cos(k * (z - h)))
     return res
 
 
@@ -121,8 +127,8 @@ def mutual_term(d, vj, vi, q):
     t = ti.Vector.zero(float, d.n)
     if within(r2, q[P.R2], False):
         w = ti.sqrt(1.0 + q[P.EPS] * r2)
-        z = (w - 1.0) / q[P.EPS]
-        rho = bump(z / q[P.RA], q[P.HA])
+        z = (w - 1.0) * q[P.INV_EPS]
+        rho = bump(z * q[P.INV_RA], q[P.HA], q[P.KA])
         t = (q[P.C1A] * rho * phi(z - q[P.DA], q) / w) * d + (q[P.C2A] * rho) * (vj - vi)
     return t
 
@@ -174,8 +180,8 @@ def beta_term(xi, vi, q, ob: ti.template(), k0, k1):
         z2 = dq.dot(dq)
         if within(z2, q[P.RB2], False):
             w = ti.sqrt(1.0 + q[P.EPS] * z2)
-            z = (w - 1.0) / q[P.EPS]
-            rho = bump(z / q[P.DB], q[P.HB])
+            z = (w - 1.0) * q[P.INV_EPS]
+            rho = bump(z * q[P.INV_DB], q[P.HB], q[P.KB])
             acc += (q[P.C1B] * rho * (s1(z - q[P.DB]) - 1.0) / w) * dq \
                 + (q[P.C2B] * rho) * (ph - vi)
     return acc

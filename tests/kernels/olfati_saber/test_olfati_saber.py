@@ -122,7 +122,7 @@ def test_bump_and_action_identities(taichi_cpu):
     @ti.kernel
     def bumps(z: ti.types.ndarray(), o: ti.types.ndarray()):
         for i in range(z.shape[0]):
-            o[i] = law.bump(z[i], 0.2)
+            o[i] = law.bump(z[i], 0.2, np.pi / 0.8)
 
     bumps(zin, out)
     got = out.to_numpy()
