@@ -1,7 +1,7 @@
 """Small-N benchmark of Olfati-Saber: the fused schedule against the per-step one, and the
 presets' figures.
 
-    python -m bench.small_n_olfati_saber                 # per-step cost at N = 20, 100, 1000
+    python -m bench.small_n_olfati_saber                 # per-step cost at N = 20, 100, 500
     python -m bench.small_n_olfati_saber --figure OUT.png    # the three presets' measures
 
 One JSON line per measurement: wall and CPU time (`time.process_time`) per step on each
@@ -25,7 +25,7 @@ import time
 
 from flocklab.schemas import PRESETS, Scenario
 
-SIZES = [20, 100, 1000]
+SIZES = [20, 100, 500]  # the fused schedule covers N <= 512
 PRESET = {2: "olfati-saber-2006-alg2", 3: "olfati-saber-2006-alg3"}
 
 
