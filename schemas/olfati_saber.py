@@ -78,7 +78,8 @@ class OlfatiSaberParams(ModelParams):
         "(Algorithm 1), eq. 24 (Algorithm 2: gamma-agent feedback), eq. 56-59 and Lemma 4 "
         "(Algorithm 3: beta-agents of spheres and walls, the sigma_1 gamma term); quality "
         "measures of section VIII (deviation energy, relative connectivity, velocity "
-        "mismatch, cohesion radius)")
+        "mismatch, cohesion radius); the equation numbers are recalled, not checked against "
+        "the printed paper (docs/models/olfati_saber.md)")
     summary: ClassVar[str] = (
         "Double integrators forming alpha-lattices (gradient of a bump-cut pair potential "
         "plus velocity consensus), with a virtual leader (Algorithm 2) and obstacle "
