@@ -90,6 +90,7 @@ MODULES = {
     "formation": "flocklab.kernels.models.formation.kernel",
     "cucker_smale": "flocklab.kernels.models.cucker_smale.kernel",
     "couzin": "flocklab.kernels.models.couzin.kernel",
+    "olfati_saber": "flocklab.kernels.models.olfati_saber.kernel",
 }
 
 

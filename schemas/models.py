@@ -17,6 +17,8 @@ from .flocking_presets import tjp_fixed  # noqa: F401  (registers the M2 and M3 
 from .formation import FormationParams  # noqa: F401  (registers M4)
 from .formation_presets import sim1  # noqa: F401  (registers the M4 presets)
 from .obstacles import ObstacleFlockingParams  # noqa: F401  (registers M3)
+from .olfati_saber import OlfatiSaberParams  # noqa: F401  (registers Olfati-Saber)
+from .olfati_saber_presets import olfati_saber_alg1  # noqa: F401  (its presets)
 from .vicsek import VicsekParams
 
 # The discriminated union of model parameter blocks, in registration order.
