@@ -9,7 +9,7 @@ figures its closing note asks for.
 3. One client (source 127.0.0.2) opening `--hold` connections with headers it never
    finishes: the time another client (127.0.0.3) takes to get `/healthz`.
 
-Run: python bench/sweep_attack.py [--seconds 90] [--hold 300]
+Run: python bench/sweep_attack.py [--seconds 90] [--hold 300] [--parts many_axes,healthz,sweep]
 """
 
 from __future__ import annotations
@@ -85,6 +85,9 @@ def run_max_sweep(server: ServerProcess, seconds: float) -> dict[str, Any]:
             samples.append((round(time.monotonic() - t0, 1), view.get("runs_done", 0),
                             round(mib(worker, "VmRSS")), round(mib(worker, "VmHWM")),
                             threads(worker)))
+            # On stderr as it goes: what was seen survives a bench stopped early.
+            print("sample (s, runs_done, worker RSS, HWM MiB, threads):", samples[-1],
+                  "API HWM MiB:", round(mib(api, "VmHWM")), file=sys.stderr, flush=True)
             if view["status"] not in ("queued", "running"):
                 break
             time.sleep(1.0)
@@ -160,7 +163,10 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seconds", type=float, default=90.0)
     ap.add_argument("--hold", type=int, default=300)
+    ap.add_argument("--parts", default="many_axes,healthz,sweep",
+                    help="which parts to run, comma-separated (default all three)")
     args = ap.parse_args()
+    parts = set(args.parts.split(","))
     # A `timeout` (SIGTERM) still stops the server and its worker (the finally below).
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
@@ -171,11 +177,13 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as d:
         server = ServerProcess(Path(d) / "data", env=env, log_level="warning").start()
         try:
-            for name, part in (("many_axes", lambda: many_axes(server)),
-                               ("healthz_while_one_client_holds_its_cap",
-                                lambda: hold_connections(server, args.hold)),
-                               ("max_size_sweep", lambda: run_max_sweep(server, args.seconds))):
-                print(json.dumps({name: part()}), flush=True)
+            for key, name, part in (
+                    ("many_axes", "many_axes", lambda: many_axes(server)),
+                    ("healthz", "healthz_while_one_client_holds_its_cap",
+                     lambda: hold_connections(server, args.hold)),
+                    ("sweep", "max_size_sweep", lambda: run_max_sweep(server, args.seconds))):
+                if key in parts:
+                    print(json.dumps({name: part()}), flush=True)
         finally:
             workers = server.children()
             server.stop()

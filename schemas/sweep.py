@@ -26,7 +26,7 @@ import itertools
 import json
 import math
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
@@ -438,8 +438,16 @@ class Sweep(Strict):
 
     @property
     def total_agent_steps(self) -> int:
-        """Sum over runs of N x steps (expands the sweep; raises SweepError if invalid)."""
-        return sum(r.scenario.n_agents * r.scenario.time.steps for r in self.expand())
+        """Sum over runs of N x steps (one pass over the runs, none kept; raises SweepError
+        if invalid)."""
+        return sum(r.scenario.n_agents * r.scenario.time.steps for r in self.iter_runs())
+
+    def grid_values(self) -> Iterator[dict[str, Any]]:
+        """Each grid point's axis values (path -> value, as in its runs' `SweepRun.values`),
+        in point order, one point at a time."""
+        for values in self._grid():
+            values.pop(REPLICAS_PATH, None)
+            yield values
 
     @property
     def base_scenario(self) -> Scenario:
@@ -462,10 +470,12 @@ class Sweep(Strict):
     def _expanded(self) -> list[SweepRun]:
         return list(self.iter_runs())
 
-    def iter_runs(self) -> Iterator[SweepRun]:
+    def iter_runs(self, wanted: Callable[[int], bool] | None = None) -> Iterator[SweepRun]:
         """The runs of `expand`, one grid point at a time and none kept: what holds the
         runs is the caller's (the service checks a 10^5-run sweep in bounded memory).
-        Validated as they come; the SweepError of `expand` comes after the last run."""
+        Validated as they come; the SweepError of `expand` comes after the last run.
+        `wanted(index)`: only those runs (a checked sweep's unfinished runs, say); a grid
+        point with none of them is not even validated, so its problems go unreported."""
         base = self.base_scenario
         doc = base.model_dump(mode="json")
         errors = unknown_paths(doc, self.model_dump(mode="json")["axes"])
@@ -480,6 +490,9 @@ class Sweep(Strict):
         bad_points = first = 0  # first: the index of the grid point's first run
         for p, values in enumerate(self._grid()):
             n_rep = values.pop(REPLICAS_PATH, self.replicas)
+            if wanted is not None and not any(wanted(first + k) for k in range(n_rep)):
+                first += n_rep
+                continue
             scenario, problems = self._point_scenario(doc, values, first, n_rep)
             if scenario is None:
                 bad_points += 1
@@ -495,6 +508,8 @@ class Sweep(Strict):
                                                  f"{seed} (base seed + {k}) >= 2^63",
                                                  type="seed_range"))
                         break
+                    if wanted is not None and not wanted(first + k):
+                        continue
                     yield SweepRun(first + k, p, k, seed, values,
                                    self._only_kept(scenario).model_copy(update={"seed": seed}))
             first += n_rep
@@ -626,7 +641,8 @@ def load_sweep(data: Any) -> Sweep:
             seen = {e.loc for e in errors}
             errors += [e for e in unknown_paths(base, data.get("axes")) if e.loc not in seen]
         raise SweepError(errors) from None
-    sweep.expand()
+    for _ in sweep.iter_runs():  # every run checked, none kept (expand() would cache them)
+        pass
     return sweep
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, Protocol
@@ -31,7 +31,7 @@ from flocklab.schemas import Scenario
 from flocklab.schemas.sweep import SweepRun
 
 from ..execute import execute_to_dir
-from .run_checkpoints import ResumedFn, run_checkpointed
+from .run_checkpoints import ResumedFn, run_alone, wants_checkpoints
 
 if TYPE_CHECKING:
     from flocklab.kernels import RunResult
@@ -64,12 +64,14 @@ class ExecutorConfig:
 class Executor(Protocol):
     """What the sweep runner (and the service's job worker) needs from an executor."""
 
-    def run_sweep_runs(self, runs: Sequence[SweepRun], keep: str, out_dir: Path,
+    def run_sweep_runs(self, runs: Iterable[SweepRun], keep: str, out_dir: Path,
                        on_result: ResultFn, should_stop: StopFn,
                        on_resumed: ResumedFn | None = None) -> None:
-        """Run `runs`; `keep` = "all" writes each run's artifacts into out_dir/runs/<i>.
-        Runs with checkpoints go on from theirs (run_checkpoints.py), said through
-        `on_resumed` where the executor can (else in the result's extra)."""
+        """Run `runs`, taken from the iterable as they go, never all at once (the runner's
+        are made lazily; its `len` is the count when it has one); `keep` = "all" writes
+        each run's artifacts into out_dir/runs/<i>. Runs with checkpoints go on from
+        theirs (run_checkpoints.py), said through `on_resumed` where the executor can
+        (else in the result's extra)."""
 
     def probe(self, scenario: Scenario) -> RunResult:
         """Run a (tiny) scenario and return its result: which observables a model has."""
@@ -99,41 +101,56 @@ def fit_threads(run: SweepRun, allowed: int) -> SweepRun:
 class LocalExecutor:
     """Runs everything in this process, through the engine."""
 
-    def run_sweep_runs(self, runs: Sequence[SweepRun], keep: str, out_dir: Path,
+    def run_sweep_runs(self, runs: Iterable[SweepRun], keep: str, out_dir: Path,
                        on_result: ResultFn, should_stop: StopFn,
                        on_resumed: ResumedFn | None = None) -> None:
+        """The runs are taken from `runs` as they go (at most BATCH_RUNS held): a run
+        with checkpoints alone (run_checkpoints.py), keep = all runs one by one, the
+        others in batches of BATCH_RUNS consecutive runs."""
         allowed = allotted_threads()
-        # Checkpointed runs go alone (run_checkpoints.py), with their threads capped too.
-        runs = run_checkpointed([fit_threads(r, allowed) for r in runs], keep, out_dir,
-                                on_result, should_stop, on_resumed)
-        if keep == "all":
-            self._with_artifacts(runs, allowed, out_dir, on_result, should_stop)
-            return
-        from flocklab import kernels
-
-        for start in range(0, len(runs), BATCH_RUNS):
-            if should_stop():
-                return
-            chunk = [fit_threads(r, allowed) for r in runs[start:start + BATCH_RUNS]]
-
-            def done(i: int, result: RunResult, chunk: list[SweepRun] = chunk) -> None:
-                if result.status != "cancelled":  # a cancelled run is redone on resume
-                    on_result(chunk[i], result)
-
-            kernels.run_batch([r.scenario for r in chunk], on_result=done,
-                              should_stop=should_stop)
-
-    @staticmethod
-    def _with_artifacts(runs: Sequence[SweepRun], allowed: int, out_dir: Path,
-                        on_result: ResultFn, should_stop: StopFn) -> None:
-        """keep = all: one run at a time through execute_to_dir (frames need a sink)."""
+        batch: list[SweepRun] = []
         for run in runs:
             if should_stop():
                 return
-            result = run_with_artifacts(fit_threads(run, allowed), out_dir, should_stop)
-            if result is None:
-                return
-            on_result(run, result)
+            run = fit_threads(run, allowed)
+            if wants_checkpoints(run):
+                if not self._batch(batch, on_result, should_stop):
+                    return
+                result = run_alone(run, keep, out_dir, should_stop, on_resumed)
+            elif keep == "all":
+                result = run_with_artifacts(run, out_dir, should_stop)
+                if result is None:
+                    return
+            else:
+                batch.append(run)
+                if len(batch) == BATCH_RUNS and not self._batch(batch, on_result,
+                                                                should_stop):
+                    return
+                continue
+            if result is not None:
+                on_result(run, result)
+        self._batch(batch, on_result, should_stop)
+
+    @staticmethod
+    def _batch(batch: list[SweepRun], on_result: ResultFn, should_stop: StopFn) -> bool:
+        """Run the runs gathered in `batch` through `kernels.run_batch` (emptying it);
+        False when should_stop ended it."""
+        if not batch:
+            return True
+        if should_stop():
+            return False
+        from flocklab import kernels
+
+        chunk = list(batch)
+        batch.clear()
+
+        def done(i: int, result: RunResult) -> None:
+            if result.status != "cancelled":  # a cancelled run is redone on resume
+                on_result(chunk[i], result)
+
+        kernels.run_batch([r.scenario for r in chunk], on_result=done,
+                          should_stop=should_stop)
+        return not should_stop()
 
     def probe(self, scenario: Scenario) -> RunResult:
         from flocklab import kernels

@@ -3,7 +3,9 @@
 This process is the Ray *driver*: it connects (`ray.init(address=...)`), submits tasks
 (bodies in ray_tasks.py) and waits for them; it never initialises Taichi. Each task runs
 a chunk of consecutive runs through `kernels.run_batch`, so the per-task overhead is
-shared by many runs and replicas still fuse into one launch; results (observables, never
+shared by many runs and replicas still fuse into one launch; chunks are cut from the
+runner's lazy feed of runs as earlier tasks end (a window of IN_FLIGHT_PER_SLOT tasks per
+slot), so the driver never holds a 10^5-run sweep's runs at once; results (observables, never
 frames) come back through Ray's object store and are recorded here, by the caller, so the
 journal and tables are written by one process only, exactly as with the local executor.
 Runs with checkpoints run one by one in their task, each checkpointing under the sweep's
@@ -25,10 +27,11 @@ If this driver process dies, Ray ends its tasks itself (their owner is gone).
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import socket
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence, Sized
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -47,6 +50,7 @@ WAIT_SECONDS = 0.2  # how often should_stop is asked while tasks run
 HEALTH_SECONDS = 5.0  # silence after which the driver checks that the cluster is there
 PROBE_COPIES = 64  # at most this many workers are warmed by the probe (see probe)
 CHUNKS_PER_CPU = 4  # a sweep is cut into about this many tasks per cluster CPU
+IN_FLIGHT_PER_SLOT = 2  # tasks submitted at once per slot: each busy, the next queued
 
 _connected: str | None = None  # the address this process's driver is connected to
 
@@ -173,28 +177,36 @@ class RayExecutor:
 
     # -- the Executor protocol ------------------------------------------------------------
 
-    def run_sweep_runs(self, runs: Sequence[SweepRun], keep: str, out_dir: Path,
+    def run_sweep_runs(self, runs: Iterable[SweepRun], keep: str, out_dir: Path,
                        on_result: ResultFn, should_stop: StopFn,
                        on_resumed: ResumedFn | None = None) -> None:
-        """A task cannot call back before it ends: a run that went on from its checkpoint
-        says so in its result's extra (`resumed_from_step`), which the runner reports
-        (`on_resumed` is not called here)."""
-        if not runs:
+        """Chunks of consecutive runs are taken from `runs` as tasks end, at most
+        IN_FLIGHT_PER_SLOT tasks per slot submitted at once, so the driver holds a window
+        of runs bounded by the cluster's size, not the sweep's. A task cannot call back
+        before it ends: a run that went on from its checkpoint says so in its result's
+        extra (`resumed_from_step`), which the runner reports (`on_resumed` is not called
+        here)."""
+        feed = iter(runs)
+        head = next(feed, None)
+        if head is None:
             return
         task = self._task(ray_tasks.run_chunk)
-        size = self.chunk_size(len(runs))
-        pending: dict[Any, list[SweepRun]] = {}
-        for start in range(0, len(runs), size):
-            chunk = list(runs[start:start + size])
+        size = self.chunk_size(len(runs)) if isinstance(runs, Sized) else BATCH_RUNS
+        chunks = _chunks(itertools.chain([head], feed), size)
+
+        def submit() -> tuple[Any, list[SweepRun]] | None:
+            chunk = next(chunks, None)
+            if chunk is None:
+                return None
             opts = _resources([r.scenario for r in chunk], self.config.threads)
-            ref = task.options(**opts).remote(chunk, keep, str(out_dir), self.config.threads)
-            pending[ref] = chunk
+            return task.options(**opts).remote(chunk, keep, str(out_dir),
+                                               self.config.threads), chunk
 
         def done(chunk: list[SweepRun], value: list[tuple[int, RunResult]]) -> None:
             for i, result in value:
                 on_result(chunk[i], result)
 
-        self._drive(pending, done, should_stop)
+        self._drive({}, done, should_stop, submit, IN_FLIGHT_PER_SLOT * self.slots())
 
     def probe(self, scenario: Scenario) -> RunResult:
         """The probe runs on every slot of the cluster at once and the first answer is
@@ -228,16 +240,30 @@ class RayExecutor:
     # -- waiting --------------------------------------------------------------------------
 
     def _drive(self, pending: dict[Any, Any], done: Callable[[Any, Any], None],
-               should_stop: StopFn) -> None:
+               should_stop: StopFn,
+               submit: Callable[[], tuple[Any, Any] | None] | None = None,
+               window: int = 0) -> None:
         """Wait for every task of `pending` (ref -> what `done` gets back with the value),
-        cancelling them all once should_stop() is true."""
+        and for those `submit()` starts (ref, what done gets; None: no more) while fewer
+        than `window` are pending, cancelling them all once should_stop() is true."""
         from ray import exceptions as rx
 
         ray = connect(self.address)
         cancel_at: float | None = None  # when the cooperative cancel was sent
         forced = False
         last_news = time.monotonic()
+
+        def top_up() -> None:
+            nonlocal submit
+            while submit is not None and cancel_at is None and len(pending) < window:
+                item = submit()
+                if item is None:
+                    submit = None
+                else:
+                    pending[item[0]] = item[1]
+
         try:
+            top_up()
             while pending:
                 try:
                     ready, _ = ray.wait(list(pending), num_returns=len(pending),
@@ -254,6 +280,7 @@ class RayExecutor:
                     value = self._value(ray, ref, stopping=cancel_at is not None)
                     if value is not _CANCELLED:
                         done(meta, value)
+                top_up()
                 now = time.monotonic()
                 if ready:
                     last_news = now
@@ -319,6 +346,12 @@ class RayExecutor:
             _connected = None  # reconnect on the next use; the old session is dead
             raise ClusterTaskLost(self.address, f"lost the Ray cluster at {self.address} "
                                   f"mid-run: its head ({gcs}) does not answer") from exc
+
+
+def _chunks(runs: Iterator[SweepRun], size: int) -> Iterator[list[SweepRun]]:
+    """Consecutive runs, `size` at a time (the last chunk may be shorter)."""
+    while chunk := list(itertools.islice(runs, size)):
+        yield chunk
 
 
 def _first_line(exc: BaseException) -> str:

@@ -30,7 +30,7 @@ import contextlib
 import logging
 import shutil
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
@@ -208,20 +208,3 @@ def _with_artifacts(run: SweepRun, out_dir: Path, should_stop: StopFn | None,
     if step is not None:
         result.extra["resumed_from_step"] = step
     return result
-
-
-def run_checkpointed(runs: Sequence[SweepRun], keep: str, out_dir: Path,
-                     on_result: Callable[[SweepRun, RunResult], None],
-                     should_stop: StopFn, on_resumed: ResumedFn | None = None
-                     ) -> list[SweepRun]:
-    """Run those of `runs` that want checkpoints, one at a time (`run_alone`), reporting
-    each finished one; the others are returned, for the executor's batches."""
-    rest = []
-    for run in runs:
-        if not wants_checkpoints(run):
-            rest.append(run)
-        elif not should_stop():
-            result = run_alone(run, keep, out_dir, should_stop, on_resumed)
-            if result is not None:
-                on_result(run, result)
-    return rest

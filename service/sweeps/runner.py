@@ -43,11 +43,12 @@ from flocklab.schemas.version import version
 
 from ..execute import run_summary
 from .executors import Executor, LocalExecutor
-from .journal import Journal, read_journal
+from .journal import Finished, Journal
 from .measures import reduce_run
 from .run_checkpoints import drop_checkpoint, wants_checkpoints
+from .run_index import PendingRuns, RunIndex
 from .sensitivity import write_sensitivity
-from .tables import SWEEP_FILE, atomic_write, axis_columns, write_tables
+from .tables import SWEEP_FILE, atomic_file, atomic_write, axis_columns, write_tables
 
 if TYPE_CHECKING:
     from flocklab.kernels import RunResult
@@ -103,22 +104,23 @@ def run_sweep(
     does not have, SweepFolderConflict for a folder holding something else; engine errors
     (e.g. kernels.BackendUnavailable) propagate, with the finished runs kept.
     """
-    runs = sweep.expand()
+    index = RunIndex.build(sweep)  # every run checked (SweepError), none kept
     out_dir = Path(out_dir)
     resuming = _check_folder(out_dir, sweep)
-    records = {i: r for i, r in read_journal(out_dir).items() if i < len(runs)} \
-        if resuming else {}
-    resumed = len(records)
-    pending = [r for r in runs if r.index not in records]
+    finished = Finished.from_journal(out_dir, index.n_runs) if resuming \
+        else Finished(index.n_runs)
+    resumed = finished.count
+    pending = PendingRuns(sweep, lambda i: i not in finished, index.n_runs - resumed)
     executor = executor or LocalExecutor()
-    if pending:  # before the folder is made: a fixed sweep file is then no "other sweep"
-        _check_observables(sweep, pending[0], executor)
+    first = next(iter(pending), None)
+    if first is not None:  # before the folder is made: a fixed sweep file is then no
+        _check_observables(sweep, first, executor)  # "other sweep"
     if not resuming:
-        _create_folder(out_dir, sweep, runs)
-    state = _State(sweep, runs, out_dir, records, on_progress, on_resumed)
+        _create_folder(out_dir, sweep, index)
+    state = _State(sweep, index, out_dir, finished, on_progress, on_resumed)
     state.progress()
-    for i in records:  # a kill between a run's journal line and the end of its checkpoint
-        if wants_checkpoints(runs[i]):
+    for i in range(index.n_runs):  # a kill between a run's journal line and the end of
+        if i in finished and index.wants_checkpoints(i):  # its checkpoint
             drop_checkpoint(out_dir, i)
 
     def stop() -> bool:
@@ -132,26 +134,23 @@ def run_sweep(
     finally:
         journal.close()
         state.write_tables()
-    done, failed = state.counts()
-    status = "completed" if len(records) == len(runs) else "cancelled"
+    status = "completed" if finished.count == index.n_runs else "cancelled"
     if status == "completed" and sweep.analysis is not None:
         write_sensitivity(out_dir, sweep)
-    return SweepOutcome(status, done, failed, len(runs), out_dir, resumed,
+    done, failed = state.counts()
+    return SweepOutcome(status, done, failed, index.n_runs, out_dir, resumed,
                         dict(state.resumed))
 
 
 class _State:
-    """What the runner holds while a sweep runs: the records and the progress reporting."""
+    """What the runner holds while a sweep runs: which runs finished (`Finished`: O(1)
+    per run, the records stay in the journal) and the progress reporting."""
 
-    def __init__(self, sweep: Sweep, runs: list[SweepRun], out_dir: Path,
-                 records: dict[int, dict[str, Any]],
+    def __init__(self, sweep: Sweep, index: RunIndex, out_dir: Path, finished: Finished,
                  on_progress: Callable[[SweepProgress], None] | None,
                  on_resumed: Callable[[int, int | None], None] | None = None):
-        self.sweep, self.runs, self.out_dir = sweep, runs, out_dir
-        self.records = records
-        # Kept as runs finish: recounting the records per finished run was quadratic
-        # (a 10^5-run sweep slowed from ~230 to ~60 runs/s by its 40,000th run).
-        self.failed = sum(1 for r in records.values() if r["status"] != "completed")
+        self.sweep, self.index, self.out_dir = sweep, index, out_dir
+        self.finished = finished
         self.on_progress = on_progress
         self.on_resumed = on_resumed
         self.resumed: dict[int, int] = {}  # run -> the checkpoint's step it went on from
@@ -159,12 +158,12 @@ class _State:
         self.table_interval = TABLE_INTERVAL
 
     def counts(self) -> tuple[int, int]:
-        return len(self.records) - self.failed, self.failed
+        return self.finished.count - self.finished.failed, self.finished.failed
 
     def progress(self) -> None:
         if self.on_progress is not None:
             done, failed = self.counts()
-            self.on_progress(SweepProgress(done, failed, len(self.runs)))
+            self.on_progress(SweepProgress(done, failed, self.index.n_runs))
 
     def resumed_run(self, run: SweepRun, step: int | None, why: str | None = None) -> None:
         """Run `run` goes on from its checkpoint at `step` (None: refused, from step 0)."""
@@ -193,13 +192,10 @@ class _State:
             folder.mkdir(parents=True, exist_ok=True)
             atomic_write(folder / "summary.json",
                          json.dumps(summary, indent=2, allow_nan=False), durable=False)
-        journal.append(record)
+        offset = journal.append(record)
         if wants_checkpoints(run) and self.sweep.keep != "all":
             drop_checkpoint(self.out_dir, run.index)
-        old = self.records.get(run.index)
-        self.failed += ((record["status"] != "completed")
-                        - (old is not None and old["status"] != "completed"))
-        self.records[run.index] = record
+        self.finished.add(run.index, offset, record["status"] == "completed")
         self.progress()
         if time.monotonic() - self.last_tables >= self.table_interval:
             self.write_tables()
@@ -208,7 +204,7 @@ class _State:
         """Rewrite the tables; the next periodic rewrite waits at least 10 times as long
         as this one took, so a sweep with long series does not spend its time in CSV."""
         t0 = time.monotonic()
-        write_tables(self.out_dir, self.sweep, self.runs, self.records)
+        write_tables(self.out_dir, self.sweep, self.index, self.finished)
         self.last_tables = time.monotonic()
         self.table_interval = max(TABLE_INTERVAL, 10 * (self.last_tables - t0))
 
@@ -294,20 +290,32 @@ def _check_folder(out_dir: Path, sweep: Sweep) -> bool:
     return False
 
 
-def _create_folder(out_dir: Path, sweep: Sweep, runs: list[SweepRun]) -> None:
-    """The folder and its sweep.json: the canonical sweep and every run."""
+def _create_folder(out_dir: Path, sweep: Sweep, index: RunIndex) -> None:
+    """The folder and its sweep.json: the canonical sweep and every run (written run by
+    run, as `json.dumps(doc, indent=2)` of the whole would print it)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     doc = {
         "flocklab_version": version(),
         "sweep": sweep.model_dump(mode="json"),
         "base": sweep.base_scenario.model_dump(mode="json"),
         "n_points": sweep.n_points,
-        "n_runs": len(runs),
-        "total_agent_steps": sweep.total_agent_steps,
+        "n_runs": index.n_runs,
+        "total_agent_steps": index.total_agent_steps,
         "axes": axis_columns(sweep),
         "measures": list(sweep.measure),
         "series": list(sweep.series),
-        "runs": [{"run": r.index, "point": r.point, "replica": r.replica, "seed": r.seed,
-                  "values": r.values} for r in runs],
+        "runs": [],
     }
-    atomic_write(out_dir / SWEEP_FILE, json.dumps(doc, indent=2, allow_nan=False))
+    head = json.dumps(doc, indent=2, allow_nan=False)
+    assert head.endswith('"runs": []\n}')
+    with atomic_file(out_dir / SWEEP_FILE) as fh:
+        fh.write(head[:-len("[]\n}")] + "[")
+        sep = "\n    "
+        for point in index.points():
+            for i, replica, seed in point.runs:
+                entry = {"run": i, "point": point.point, "replica": replica, "seed": seed,
+                         "values": point.values}
+                fh.write(sep + json.dumps(entry, indent=2, allow_nan=False)
+                         .replace("\n", "\n    "))
+                sep = ",\n    "
+        fh.write("\n  ]\n}")

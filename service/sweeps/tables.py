@@ -24,20 +24,24 @@ Design paths are axis columns too (after the axes'), their values the design's.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
 import math
 import os
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Literal
+from typing import IO, Any, Literal
 
 import numpy as np
 
-from flocklab.schemas.sweep import REPLICAS_PATH, Measure, Sweep, SweepRun
+from flocklab.schemas.sweep import REPLICAS_PATH, Measure, Sweep
 
+from .journal import Finished
 from .measures import combined_error, pooled_stats, replica_stats
+from .run_index import RunIndex
 
 TABLES = ("runs", "table", "series", "sensitivity")
 SWEEP_FILE = "sweep.json"
@@ -48,39 +52,66 @@ def axis_columns(sweep: Sweep) -> list[str]:
     return [a.path for a in sweep.axis_entries() if a.path != REPLICAS_PATH]
 
 
-def write_tables(out_dir: Path, sweep: Sweep, runs: list[SweepRun],
-                 records: dict[int, dict[str, Any]]) -> None:
-    """(Re)write runs.csv, table.csv and, when the sweep names series, series.csv from the
-    finished runs' records (index -> record, see runner.py)."""
+def write_tables(out_dir: Path, sweep: Sweep, index: RunIndex, finished: Finished) -> None:
+    """(Re)write runs.csv, table.csv and, when the sweep names series, series.csv: one
+    pass over the runs in index order (`index`), each finished run's record read back
+    from the journal (`finished`), so that only one grid point's records are held."""
+    out_dir = Path(out_dir)
     axes = axis_columns(sweep)
     columns = [c for n, m in sweep.measure.items() for c in m.run_columns(n)]
-    rows = []
-    for r in runs:
-        rec = records.get(r.index)
-        measures = rec["measures"] if rec else {}
-        rows.append([r.index, r.point, *(_axis_cell(r.values[a]) for a in axes), r.replica,
-                     r.seed, rec["status"] if rec else "pending",
-                     *(measures.get(c) for c in columns)])
-    atomic_write(out_dir / "runs.csv",
-                 csv_text(["run", "point", *axes, "replica", "seed", "status", *columns], rows))
+    names = ["runs", "table", *(["series"] if sweep.series else [])]
+    with contextlib.ExitStack() as stack:
+        # Entered last to first, so that the renames at the end go first to last.
+        files = {n: stack.enter_context(atomic_file(out_dir / f"{n}.csv"))
+                 for n in reversed(names)}
+        journal = stack.enter_context(finished.reader(out_dir))
+        runs = csv.writer(files["runs"], lineterminator="\n")
+        table = csv.writer(files["table"], lineterminator="\n")
+        runs.writerow(["run", "point", *axes, "replica", "seed", "status", *columns])
+        table.writerow(["point", *axes, *(f"{q}_{s}" for n, m in sweep.measure.items()
+                                          for q, err in m.table_quantities(n)
+                                          for s in (("mean", "sd", "sem", "err", "count")
+                                                    if err else ("mean", "sd", "sem",
+                                                                 "count")))])
+        series = None
+        if sweep.series:
+            series = csv.writer(files["series"], lineterminator="\n")
+            series.writerow(["point", *axes, "step", "time",
+                             *(f"{o}_{s}" for o in sweep.series for s in ("mean", "sd"))])
+        for point in index.points():
+            cells = [_axis_cell(point.values[a]) for a in axes]
+            done: list[dict[str, Any]] = []  # the point's finished runs' measures
+            curves: list[dict[str, Any]] = []  # its completed runs' series
+            for i, replica, seed in point.runs:
+                rec = journal.get(i)
+                measures = rec["measures"] if rec else {}
+                runs.writerow(_nums([i, point.point, *cells, replica, seed,
+                                     rec["status"] if rec else "pending",
+                                     *(measures.get(c) for c in columns)]))
+                if rec:
+                    done.append(measures)
+                    if rec["status"] == "completed":
+                        curves.append(rec["series"])
+            table.writerow(_nums([point.point, *cells, *(
+                x for n, m in sweep.measure.items()
+                for x in _point_cells(n, m, done, point.n_agents))]))
+            if series is not None and curves:
+                series.writerows(_nums(row) for row in
+                                 _series_rows(sweep, point.point, cells, curves))
 
-    points: dict[int, list[SweepRun]] = {}
-    for r in runs:
-        points.setdefault(r.point, []).append(r)
-    header = ["point", *axes, *(f"{q}_{s}" for n, m in sweep.measure.items()
-                                for q, err in m.table_quantities(n)
-                                for s in (("mean", "sd", "sem", "err", "count") if err
-                                          else ("mean", "sd", "sem", "count")))]
-    rows = []
-    for p, members in points.items():
-        done = [records[r.index]["measures"] for r in members if r.index in records]
-        cells = [x for n, m in sweep.measure.items()
-                 for x in _point_cells(n, m, done, members[0].scenario.n_agents)]
-        rows.append([p, *(_axis_cell(members[0].values[a]) for a in axes), *cells])
-    atomic_write(out_dir / "table.csv", csv_text(header, rows))
 
-    if sweep.series:
-        atomic_write(out_dir / "series.csv", _series_csv(sweep, axes, points, records))
+def _series_rows(sweep: Sweep, point: int, cells: list[str],
+                 done: list[dict[str, Any]]) -> Iterator[list[Any]]:
+    """One grid point's series.csv rows: per observation step the completed replicas'
+    mean and sd of each series."""
+    # Replicas of one point differ only in the seed: the same observation steps.
+    stacks = {o: np.array([d[o] for d in done], dtype=np.float64) for o in sweep.series}
+    mean = {o: v.mean(axis=0) for o, v in stacks.items()}
+    sd = {o: v.std(axis=0, ddof=1) if len(done) > 1 else None for o, v in stacks.items()}
+    for t, (step, time) in enumerate(zip(done[0]["step"], done[0]["time"], strict=True)):
+        yield [point, *cells, step, time,
+               *(x for o in sweep.series
+                 for x in (mean[o][t], None if sd[o] is None else sd[o][t]))]
 
 
 def _point_cells(name: str, m: Measure, done: list[dict[str, Any]],
@@ -97,28 +128,6 @@ def _point_cells(name: str, m: Measure, done: list[dict[str, Any]],
         err = [combined_error([d.get(q + "_err") for d in done])] if has_err else []
         cells += [mean, sd, sem, *err, count]
     return cells
-
-
-def _series_csv(sweep: Sweep, axes: list[str], points: dict[int, list[SweepRun]],
-                records: dict[int, dict[str, Any]]) -> str:
-    header = ["point", *axes, "step", "time",
-              *(f"{o}_{s}" for o in sweep.series for s in ("mean", "sd"))]
-    rows = []
-    for p, members in points.items():
-        done = [records[r.index]["series"] for r in members
-                if records.get(r.index, {}).get("status") == "completed"]
-        if not done:
-            continue
-        # Replicas of one point differ only in the seed: the same observation steps.
-        stacks = {o: np.array([d[o] for d in done], dtype=np.float64) for o in sweep.series}
-        mean = {o: v.mean(axis=0) for o, v in stacks.items()}
-        sd = {o: v.std(axis=0, ddof=1) if len(done) > 1 else None for o, v in stacks.items()}
-        cells = [_axis_cell(members[0].values[a]) for a in axes]
-        for t, (step, time) in enumerate(zip(done[0]["step"], done[0]["time"], strict=True)):
-            rows.append([p, *cells, step, time,
-                         *(x for o in sweep.series
-                           for x in (mean[o][t], None if sd[o] is None else sd[o][t]))])
-    return csv_text(header, rows)
 
 
 def read_table(out_dir: Path, fmt: Literal["csv", "json"] = "csv",
@@ -176,22 +185,34 @@ def _num(value: Any) -> str:
     return repr(v) if math.isfinite(v) else ""
 
 
+def _nums(row: list[Any]) -> list[str]:
+    return [_num(c) for c in row]
+
+
 def csv_text(header: list[str], rows: list[list[Any]]) -> str:
     """One header row, then the rows (cells as _num writes them: empty for None/NaN)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)
-    w.writerows([_num(c) for c in row] for row in rows)
+    w.writerows(_nums(row) for row in rows)
     return buf.getvalue()
 
 
 def atomic_write(path: Path, text: str, *, durable: bool = True) -> None:
     """Write `text` to `path` through a temporary sibling and a rename, so a reader or a
     crash never sees a half-written file; `durable` fsyncs it before the rename."""
+    with atomic_file(path, durable=durable) as fh:
+        fh.write(text)
+
+
+@contextlib.contextmanager
+def atomic_file(path: Path, *, durable: bool = True) -> Iterator[IO[str]]:
+    """A text file to write `path` through: a temporary sibling, renamed to `path` when
+    the block ends (fsynced first when `durable`), removed if it raises."""
     tmp = path.with_name(f".{path.name}.tmp-{uuid.uuid4().hex[:8]}")
     try:
         with open(tmp, "w") as fh:
-            fh.write(text)
+            yield fh
             fh.flush()
             if durable:
                 os.fsync(fh.fileno())
@@ -205,16 +226,14 @@ def rebuild_tables(out_dir: Path) -> bool:
     """Rewrite the tables of a sweep folder from its sweep.json and journal (runs.jsonl,
     each finished run once); False when it holds no finished run. For a sweep whose
     worker died before it could write them: the finished runs are kept, not thrown away."""
-    from .journal import read_journal
-
     try:
         sweep = Sweep.model_validate(json.loads((Path(out_dir) / SWEEP_FILE).read_text())
                                      ["sweep"])
     except (OSError, ValueError, KeyError, TypeError):
         return False  # no sweep.json yet: the attempt died before its first run
-    runs = sweep.expand()
-    records = {i: r for i, r in read_journal(out_dir).items() if i < len(runs)}
-    if not records:
+    index = RunIndex.build(sweep)
+    finished = Finished.from_journal(out_dir, index.n_runs)
+    if not finished.count:
         return False
-    write_tables(Path(out_dir), sweep, runs, records)
+    write_tables(Path(out_dir), sweep, index, finished)
     return True
