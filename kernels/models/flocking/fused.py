@@ -346,14 +346,92 @@ def velocity_stats(row, a0, n, ps: ti.template(), lo: ti.template(), hi: ti.temp
     return 0.5 * kin
 
 
-@cache
-def advance_kernel(mode: int, dim: int = 2, rk4: bool = False):
-    """The window kernel for one mode (fixed graph, switching (M2) or mission (M3)),
-    dimension (2 or 3) and integrator (semi-implicit Euler or RK4)."""
-    fixed = mode == MODES["fixed"]
+# The arrays of a window, as one compile-time tuple (its order: ARRAYS).
+(AOFF, COFF, OOFF, PRM, IPRM, POS, VEL, RADII, PS, CELL, CSTART, CIDX, PARENT, CSUM, MIS,
+ ARC_LO, ARC_HI, PTR, IDX, OPOS, ORAD, OSTART, OBS, VAL, SNAP, SBASE, RKS) = range(
+    len(ARRAYS))
+
+
+@ti.func
+def cells_across(g):
+    return ti.math.ivec3(ti.cast(g[G_NX], ti.i32), ti.cast(g[G_NY], ti.i32),
+                         ti.cast(g[G_NZ], ti.i32))
+
+
+@ti.func
+def mission_observables(b, a0, n, row, q, prm: ti.template(), ps: ti.template(),
+                        parent: ti.template(), csum: ti.template(), mis: ti.template(),
+                        obs: ti.template(), dim: ti.template()):
+    """M3's observables of X(s) (ps in slot order, V_i in mis, the metric graph's
+    union-find forest in parent) into obs[row]: the mission potential, destination and
+    obstacle distances, the radii, Q's constant part and the per-component velocity
+    disagreement; returns sum_i V_i (eq. 5's mission part of Q)."""
+    X, V, RAD = ti.static(columns(dim)[0], columns(dim)[1], columns(dim)[2])
+    msum = 0.0
+    inside = 0
+    mmax = -ti.math.inf
+    omin = prm[b, P.OCAP]  # exact below the obstacle grid's cell; capped there
+    dmean = 0.0
+    dfar = 0.0
+    rmin = ti.math.inf
+    rmax = 0.0
+    rsum = 0.0
+    qc = 0.0
+    dest = ti.Vector([prm[b, DEST[c]] for c in ti.static(range(dim))], dt=float)
+    for k in range(a0, a0 + n):
+        vk = mis[k, 0]
+        msum += vk
+        if vk <= prm[b, P.VMIN]:
+            inside += 1
+        mmax = ti.max(mmax, vk)
+        omin = ti.min(omin, mis[k, dim + 1])
+        y = _row(ps, k, X, dim) - dest
+        dd = ti.sqrt(y.dot(y))
+        dmean += dd
+        dfar = ti.max(dfar, dd)
+        r = ps[k, RAD]
+        rmin = ti.min(rmin, r)
+        rmax = ti.max(rmax, r)
+        rsum += r
+        qc += potentials.value(r * r, q[2], q[3])
+        for c in ti.static(range(dim + 1)):
+            csum[k, c] = 0.0
+    obs[row, COL["q_constant"]] = 0.5 * (n - 1) * qc
+    obs[row, COL["destination_distance_mean"]] = dmean / n
+    obs[row, COL["destination_distance_max"]] = dfar
+    obs[row, COL["inside_vmin_fraction"]] = ti.cast(inside, float) / n
+    obs[row, COL["mission_potential_max"]] = mmax
+    obs[row, COL["obstacle_distance_min"]] = omin
+    obs[row, COL["radius_min"]] = rmin
+    obs[row, COL["radius_mean"]] = rsum / n
+    obs[row, COL["radius_max"]] = rmax
+    # Paper 002: each component synchronises on its own (csum: the velocity sum
+    # and member count of each component, at its root).
+    for k in range(a0, a0 + n):
+        root = find_serial(parent, k)
+        for c in ti.static(range(dim)):
+            csum[root, c] = csum[root, c] + ps[k, V + c]
+        csum[root, dim] = csum[root, dim] + 1.0
+    dev = 0.0
+    dev_max = 0.0
+    for k in range(a0, a0 + n):
+        root = find_serial(parent, k)
+        cnt = csum[root, dim]
+        e = _row(ps, k, V, dim) - _row(csum, root, 0, dim) / cnt
+        d2 = e.dot(e)
+        dev += d2
+        dev_max = ti.max(dev_max, d2)
+    obs[row, COL["velocity_disagreement_components"]] = dev
+    obs[row, COL["velocity_disagreement_components_max"]] = ti.sqrt(dev_max)
+    return msum
+
+
+def _pair_visits(mode: int, dim: int):
+    """The pair terms of a window (the law's, over slot k's candidates m, d = r_m - r_k)
+    and their visits: (pair_radius2, visit_force, visit_radius, visit_observe,
+    visit_closest)."""
     mission = mode == MODES["mission"]
-    X, V, RAD, HC, _ = columns(dim)
-    R0, V0, RK, VK, U = rk_columns(dim)
+    V, RAD = columns(dim)[1], columns(dim)[2]
 
     @ti.func
     def pair_radius2(k, q, ps: ti.template()):
@@ -407,7 +485,14 @@ def advance_kernel(mode: int, dim: int = 2, rk4: bool = False):
     visit_radius = make_visit(radius_pair, dim)
     visit_observe = make_visit(observe_pair, dim)
     visit_closest = make_visit(closest_pair, dim, by_id=True)
-    state_grid, closest_grid = _cells[dim, True], _cells[dim, False]
+    return pair_radius2, visit_force, visit_radius, visit_observe, visit_closest
+
+
+def _closest_search(dim: int, visit_closest):
+    """The closest pair's search of a window: (closest_all_pairs, closest_cells,
+    write_closest)."""
+    X = columns(dim)[0]
+    closest_grid = _cells[dim, False]
 
     @ti.func
     def closest_all_pairs(a0, n, ps: ti.template()):
@@ -473,6 +558,15 @@ def advance_kernel(mode: int, dim: int = 2, rk4: bool = False):
         obs[row, COL["min_distance"]] = ti.sqrt(best[0])
         obs[row, COL["min_pair_i"]] = ti.min(i, j) - a0
         obs[row, COL["min_pair_j"]] = ti.max(i, j) - a0
+
+    return closest_all_pairs, closest_cells, write_closest
+
+
+def _observers(mode: int, dim: int, pair_radius2, visit_observe, closest):
+    """The observation passes of a window: (observe_fixed, observe_metric)."""
+    mission = mode == MODES["mission"]
+    X, RAD = columns(dim)[0], columns(dim)[2]
+    closest_all_pairs, closest_cells, write_closest = closest
 
     @ti.func
     def observe_fixed(b, a0, n, c0, cap, row, prm: ti.template(), ps: ti.template(),
@@ -542,63 +636,8 @@ def advance_kernel(mode: int, dim: int = 2, rk4: bool = False):
         obs[row, COL["components"]] = roots
         energy = 0.5 * pot + kin
         if ti.static(mission):
-            msum = 0.0
-            inside = 0
-            mmax = -ti.math.inf
-            omin = prm[b, P.OCAP]  # exact below the obstacle grid's cell; capped there
-            dmean = 0.0
-            dfar = 0.0
-            rmin = ti.math.inf
-            rmax = 0.0
-            rsum = 0.0
-            qc = 0.0
-            dest = ti.Vector([prm[b, DEST[c]] for c in ti.static(range(dim))], dt=float)
-            for k in range(a0, a0 + n):
-                vk = mis[k, 0]
-                msum += vk
-                if vk <= prm[b, P.VMIN]:
-                    inside += 1
-                mmax = ti.max(mmax, vk)
-                omin = ti.min(omin, mis[k, dim + 1])
-                y = _row(ps, k, X, dim) - dest
-                dd = ti.sqrt(y.dot(y))
-                dmean += dd
-                dfar = ti.max(dfar, dd)
-                r = ps[k, RAD]
-                rmin = ti.min(rmin, r)
-                rmax = ti.max(rmax, r)
-                rsum += r
-                qc += potentials.value(r * r, q[2], q[3])
-                for c in ti.static(range(dim + 1)):
-                    csum[k, c] = 0.0
-            energy += msum  # eq. 5: + sum_i V_i
-            obs[row, COL["q_constant"]] = 0.5 * (n - 1) * qc
-            obs[row, COL["destination_distance_mean"]] = dmean / n
-            obs[row, COL["destination_distance_max"]] = dfar
-            obs[row, COL["inside_vmin_fraction"]] = ti.cast(inside, float) / n
-            obs[row, COL["mission_potential_max"]] = mmax
-            obs[row, COL["obstacle_distance_min"]] = omin
-            obs[row, COL["radius_min"]] = rmin
-            obs[row, COL["radius_mean"]] = rsum / n
-            obs[row, COL["radius_max"]] = rmax
-            # Paper 002: each component synchronises on its own (csum: the velocity sum
-            # and member count of each component, at its root).
-            for k in range(a0, a0 + n):
-                root = find_serial(parent, k)
-                for c in ti.static(range(dim)):
-                    csum[root, c] = csum[root, c] + ps[k, V + c]
-                csum[root, dim] = csum[root, dim] + 1.0
-            dev = 0.0
-            dev_max = 0.0
-            for k in range(a0, a0 + n):
-                root = find_serial(parent, k)
-                cnt = csum[root, dim]
-                e = _row(ps, k, V, dim) - _row(csum, root, 0, dim) / cnt
-                d2 = e.dot(e)
-                dev += d2
-                dev_max = ti.max(dev_max, d2)
-            obs[row, COL["velocity_disagreement_components"]] = dev
-            obs[row, COL["velocity_disagreement_components_max"]] = ti.sqrt(dev_max)
+            energy += mission_observables(b, a0, n, row, q, prm, ps, parent, csum, mis, obs,
+                                          dim)  # eq. 5: + sum_i V_i
         else:
             obs[row, COL["q_constant"]] = prm[b, P.QC]
         obs[row, COL["energy"]] = energy
@@ -611,76 +650,16 @@ def advance_kernel(mode: int, dim: int = 2, rk4: bool = False):
                 if ti.static(mission):
                     snap[at + dim] = ps[k, RAD]
 
-    # The arrays of a window, as one compile-time tuple (its order: ARRAYS).
-    (AOFF, COFF, OOFF, PRM, IPRM, POS, VEL, RADII, PS, CELL, CSTART, CIDX, PARENT, CSUM, MIS,
-     ARC_LO, ARC_HI, PTR, IDX, OPOS, ORAD, OSTART, OBS, VAL, SNAP, SBASE, RKS) = range(
-        len(ARRAYS))
+    return observe_fixed, observe_metric
 
-    @ti.func
-    def cells_across(g):
-        return ti.math.ivec3(ti.cast(g[G_NX], ti.i32), ti.cast(g[G_NY], ti.i32),
-                             ti.cast(g[G_NZ], ti.i32))
 
-    @ti.func
-    def load(b, s, a0, n, c0, cap, A: ti.template()):
-        """Replica b's prologue of step s: (live, g). The cell list of r(s) (switching, M3;
-        g: replica_cells' grid vector, all pairs without one), X(s) copied into slot
-        order (every visit reads it) and V_i at r(s) (M3). live 0: the swarm ran away
-        (recorded here)."""
-        prm, iprm, pos, vel, rad = ti.static(A[PRM], A[IPRM], A[POS], A[VEL], A[RADII])
-        ps, cell, cstart, cidx = ti.static(A[PS], A[CELL], A[CSTART], A[CIDX])
-        live = 1
-        g = ti.Vector([0.0, 0.0, 1.0, 0.0, 0.0] + [0.0 for _ in ti.static(range(dim))],
-                      dt=float)  # all pairs
-        gridded = False
-        if ti.static(not fixed):
-            gridded = iprm[b, IP.CELLS] != 0
-        if gridded:
-            w0 = prm[b, P.R] * ti.static(widen())
-            g = state_grid(a0, n, c0, cap, w0, 0.0, pos, cell, cstart, cidx, ())
-            if g[G_NX] < 0:
-                iprm[b, IP.BAD] = s
-                iprm[b, IP.CAUSE] = 1
-                prm[b, P.SPAN] = g[G_SPAN]
-                live = 0
-        else:
-            for k in range(n):
-                cidx[a0 + k] = a0 + k
-        if live:
-            hashed = g[G_NY] < 0
-            w = g[G_W]
-            for k in range(a0, a0 + n):
-                i = cidx[k]
-                for c in ti.static(range(dim)):
-                    ps[k, X + c] = pos[i, c]
-                    ps[k, V + c] = vel[i, c]
-                if ti.static(mission):
-                    ps[k, RAD] = rad[i]
-                if hashed:  # each slot's exact cell
-                    for c in ti.static(range(dim)):
-                        ps[k, HC + c] = ti.floor((pos[i, c] - g[G_O + c]) / w)
-            if ti.static(mission):  # V_i at r(s): read by all three passes of the step
-                for k in range(a0, a0 + n):
-                    put(A[MIS], k, navigation(b, _row(ps, k, X, dim), prm, iprm, A[OPOS],
-                                              A[ORAD], A[OSTART]))
-        return live, g
-
-    @ti.func
-    def observation(b, s, a0, n, c0, cap, g, q, A: ti.template()):
-        """The observables of X(s) into the replica's next row of obs."""
-        iprm = ti.static(A[IPRM])
-        row = A[OOFF][b] + iprm[b, IP.NOBS]
-        A[OBS][row, 0] = s
-        if ti.static(fixed):
-            observe_fixed(b, a0, n, c0, cap, row, A[PRM], A[PS], A[PTR], A[IDX], A[CELL],
-                          A[CSTART], A[CIDX], A[ARC_LO], A[ARC_HI], A[OBS])
-        else:
-            nc = cells_across(g)
-            observe_metric(b, a0, n, c0, nc[0], nc[1], nc[2], g[G_W], row, iprm[b, IP.NOBS],
-                           q, A[PRM], iprm, A[PS], A[CELL], A[CSTART], A[CIDX], A[PARENT],
-                           A[CSUM], A[ARC_LO], A[ARC_HI], A[MIS], A[OBS], A[VAL], A[SNAP],
-                           A[SBASE])
-        iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
+def _motion(mode: int, dim: int, visit_force, visit_radius, load):
+    """The motion passes of a window: (adapt, move, move_rk4); `load` brings a stage
+    state into slot order as it does X(s)."""
+    fixed = mode == MODES["fixed"]
+    mission = mode == MODES["mission"]
+    X, V, RAD = columns(dim)[:3]
+    R0, V0, RK, VK, U = rk_columns(dim)
 
     @ti.func
     def adapt(b, a0, n, c0, g, q, A: ti.template()):
@@ -803,6 +782,85 @@ def advance_kernel(mode: int, dim: int = 2, rk4: bool = False):
                 put(vel, i, v)
                 bad |= nonfinite(x, v)
         return bad, live
+
+    return adapt, move, move_rk4
+
+
+@cache
+def advance_kernel(mode: int, dim: int = 2, rk4: bool = False):
+    """The window kernel for one mode (fixed graph, switching (M2) or mission (M3)),
+    dimension (2 or 3) and integrator (semi-implicit Euler or RK4)."""
+    fixed = mode == MODES["fixed"]
+    mission = mode == MODES["mission"]
+    X, V, RAD, HC, _ = columns(dim)
+    pair_radius2, visit_force, visit_radius, visit_observe, visit_closest = _pair_visits(
+        mode, dim)
+    observe_fixed, observe_metric = _observers(
+        mode, dim, pair_radius2, visit_observe, _closest_search(dim, visit_closest))
+    state_grid = _cells[dim, True]
+
+    @ti.func
+    def load(b, s, a0, n, c0, cap, A: ti.template()):
+        """Replica b's prologue of step s: (live, g). The cell list of r(s) (switching, M3;
+        g: replica_cells' grid vector, all pairs without one), X(s) copied into slot
+        order (every visit reads it) and V_i at r(s) (M3). live 0: the swarm ran away
+        (recorded here)."""
+        prm, iprm, pos, vel, rad = ti.static(A[PRM], A[IPRM], A[POS], A[VEL], A[RADII])
+        ps, cell, cstart, cidx = ti.static(A[PS], A[CELL], A[CSTART], A[CIDX])
+        live = 1
+        g = ti.Vector([0.0, 0.0, 1.0, 0.0, 0.0] + [0.0 for _ in ti.static(range(dim))],
+                      dt=float)  # all pairs
+        gridded = False
+        if ti.static(not fixed):
+            gridded = iprm[b, IP.CELLS] != 0
+        if gridded:
+            w0 = prm[b, P.R] * ti.static(widen())
+            g = state_grid(a0, n, c0, cap, w0, 0.0, pos, cell, cstart, cidx, ())
+            if g[G_NX] < 0:
+                iprm[b, IP.BAD] = s
+                iprm[b, IP.CAUSE] = 1
+                prm[b, P.SPAN] = g[G_SPAN]
+                live = 0
+        else:
+            for k in range(n):
+                cidx[a0 + k] = a0 + k
+        if live:
+            hashed = g[G_NY] < 0
+            w = g[G_W]
+            for k in range(a0, a0 + n):
+                i = cidx[k]
+                for c in ti.static(range(dim)):
+                    ps[k, X + c] = pos[i, c]
+                    ps[k, V + c] = vel[i, c]
+                if ti.static(mission):
+                    ps[k, RAD] = rad[i]
+                if hashed:  # each slot's exact cell
+                    for c in ti.static(range(dim)):
+                        ps[k, HC + c] = ti.floor((pos[i, c] - g[G_O + c]) / w)
+            if ti.static(mission):  # V_i at r(s): read by all three passes of the step
+                for k in range(a0, a0 + n):
+                    put(A[MIS], k, navigation(b, _row(ps, k, X, dim), prm, iprm, A[OPOS],
+                                              A[ORAD], A[OSTART]))
+        return live, g
+
+    @ti.func
+    def observation(b, s, a0, n, c0, cap, g, q, A: ti.template()):
+        """The observables of X(s) into the replica's next row of obs."""
+        iprm = ti.static(A[IPRM])
+        row = A[OOFF][b] + iprm[b, IP.NOBS]
+        A[OBS][row, 0] = s
+        if ti.static(fixed):
+            observe_fixed(b, a0, n, c0, cap, row, A[PRM], A[PS], A[PTR], A[IDX], A[CELL],
+                          A[CSTART], A[CIDX], A[ARC_LO], A[ARC_HI], A[OBS])
+        else:
+            nc = cells_across(g)
+            observe_metric(b, a0, n, c0, nc[0], nc[1], nc[2], g[G_W], row, iprm[b, IP.NOBS],
+                           q, A[PRM], iprm, A[PS], A[CELL], A[CSTART], A[CIDX], A[PARENT],
+                           A[CSUM], A[ARC_LO], A[ARC_HI], A[MIS], A[OBS], A[VAL], A[SNAP],
+                           A[SBASE])
+        iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
+
+    adapt, move, move_rk4 = _motion(mode, dim, visit_force, visit_radius, load)
 
     @ti.func
     def replica(b, s0, s1, A: ti.template()):
