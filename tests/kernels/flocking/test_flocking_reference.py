@@ -247,8 +247,8 @@ class FusedKernel:
 
 
 def fused_or_skip(path: str, sc: Scenario, variant: bool = False) -> None:
-    """Skip the fused run of a per-step variant (rk4, M3's radius_rule min: the engine
-    runs them per step; variant: the hashed grid, a per-step concept)."""
+    """Skip the fused run of a per-step variant (M3's radius_rule min: the engine runs it
+    per step; variant: the hashed grid, a per-step concept)."""
     if path == "fused" and (variant or kernels.engine.choose_path(sc, "cpu") == "per_step"):
         pytest.skip("a per-step path variant")
 
