@@ -348,7 +348,7 @@ def velocity_stats(row, a0, n, ps: ti.template(), lo: ti.template(), hi: ti.temp
 
 # The arrays of a window, as one compile-time tuple (its order: ARRAYS).
 (AOFF, COFF, OOFF, PRM, IPRM, POS, VEL, RADII, PS, CELL, CSTART, CIDX, PARENT, CSUM, MIS,
- ARC_LO, ARC_HI, PTR, IDX, OPOS, ORAD, OSTART, OBS, VAL, SNAP, SBASE, RKS) = range(
+ ARC_LO, ARC_HI, PTR, IDX, OPOS, ORAD, OSTART, OBS_ROWS, VAL, SNAP, SBASE, RKS) = range(
     len(ARRAYS))
 
 
@@ -848,15 +848,15 @@ def advance_kernel(mode: int, dim: int = 2, rk4: bool = False):
         """The observables of X(s) into the replica's next row of obs."""
         iprm = ti.static(A[IPRM])
         row = A[OOFF][b] + iprm[b, IP.NOBS]
-        A[OBS][row, 0] = s
+        A[OBS_ROWS][row, 0] = s
         if ti.static(fixed):
             observe_fixed(b, a0, n, c0, cap, row, A[PRM], A[PS], A[PTR], A[IDX], A[CELL],
-                          A[CSTART], A[CIDX], A[ARC_LO], A[ARC_HI], A[OBS])
+                          A[CSTART], A[CIDX], A[ARC_LO], A[ARC_HI], A[OBS_ROWS])
         else:
             nc = cells_across(g)
             observe_metric(b, a0, n, c0, nc[0], nc[1], nc[2], g[G_W], row, iprm[b, IP.NOBS],
                            q, A[PRM], iprm, A[PS], A[CELL], A[CSTART], A[CIDX], A[PARENT],
-                           A[CSUM], A[ARC_LO], A[ARC_HI], A[MIS], A[OBS], A[VAL], A[SNAP],
+                           A[CSUM], A[ARC_LO], A[ARC_HI], A[MIS], A[OBS_ROWS], A[VAL], A[SNAP],
                            A[SBASE])
         iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
 
