@@ -110,10 +110,9 @@ def main() -> None:
             row = timed(tanner_3d(100, 3000 if fused else 300), fused)
             print(json.dumps({"scenario": "tanner-obstacles-3d", "N": 100, **row}), flush=True)
         return
-    paths = (True, False)
     for n in SIZES:
         for name in ("tjp-switching", "tjp-fixed"):
-            for fused in paths:
+            for fused in (True, False):
                 steps = (3000 if n <= 100 else 1000) if fused else 300
                 sc = preset_like(name, n, steps, args.dim, args.observables, args.integrator)
                 print(json.dumps({"scenario": name, "dim": args.dim, "N": n,
