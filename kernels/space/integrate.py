@@ -13,6 +13,10 @@ y = (r, v), f = (v, u), moved by the `_pair` kernels (one launch for both arrays
 run's step is mostly launches): its position stage takes the stage velocity as k and reads
 it before the velocity stage moves it; `rk4_pair_step` is that step of a family's u (flocking,
 Cucker–Smale). M4's single integrator r' = u(r) is one array.
+The arithmetic of a stage and of the finish is written once, on values (`stage_value`,
+`finish_value`, and for the pair `stage_pair` / `finish_pair`, over STAGES): these kernels
+apply it to array entries, the fused schedules (one replica per CPU task) to an agent's
+vectors, so every schedule's RK4 is the same sums.
 Semi-implicit Euler, the default, is fused into the force kernels of each family;
 `nonfinite` is their test of a step's result.
 """
@@ -23,6 +27,37 @@ from typing import Any
 import taichi as ti
 
 nd = ti.types.ndarray()
+# The stages after k1: (weight w of the k just evaluated in the sum, the next stage's step
+# c as a fraction of h): c = h/2, h/2, h (h * 0.5 is h / 2 exactly).
+STAGES = ((1.0, 0.5), (2.0, 0.5), (2.0, 1.0))
+
+
+@ti.func
+def stage_value(y0, k, yk, w, c):
+    """One stage on values (scalars or vectors): (yk + w k, y0 + c k), the sum so far and
+    the next stage state."""
+    return yk + w * k, y0 + c * k
+
+
+@ti.func
+def finish_value(y0, k, yk, h6):
+    """y1 = y0 + h/6 (yk + k4), k = k4."""
+    return y0 + h6 * (yk + k)
+
+
+@ti.func
+def stage_pair(r0, v0, vs, u, rk, vk, w, c):
+    """One stage of (r, v)' = (v, u) on an agent's values: (rs, vs, rk, vk) of the next
+    stage, the position's k the stage velocity vs (read before vs moves)."""
+    rk1, rs1 = stage_value(r0, vs, rk, w, c)
+    vk1, vs1 = stage_value(v0, u, vk, w, c)
+    return rs1, vs1, rk1, vk1
+
+
+@ti.func
+def finish_pair(r0, v0, vs, u, rk, vk, h6):
+    """(r1, v1) of (r, v)' = (v, u) from the last stage (vs, u) and the sums (rk, vk)."""
+    return finish_value(r0, vs, rk, h6), finish_value(v0, u, vk, h6)
 
 
 @ti.func
@@ -34,14 +69,13 @@ def _begin(y0: ti.template(), ys: ti.template(), yk: ti.template(), i, m):
 @ti.func
 def _stage(y0: ti.template(), ys: ti.template(), k: ti.template(), yk: ti.template(), w, c,
            i, m):
-    yk[i, m] += w * k[i, m]
-    ys[i, m] = y0[i, m] + c * k[i, m]
+    yk[i, m], ys[i, m] = stage_value(y0[i, m], k[i, m], yk[i, m], w, c)
 
 
 @ti.func
 def _finish(y0: ti.template(), k: ti.template(), yk: ti.template(), h6, y_out: ti.template(),
             i, m):
-    y_out[i, m] = y0[i, m] + h6 * (yk[i, m] + k[i, m])
+    y_out[i, m] = finish_value(y0[i, m], k[i, m], yk[i, m], h6)
 
 
 @ti.kernel
@@ -139,7 +173,7 @@ def rk4_pair_step(x0, v0, b: dict, h: float, accel: Callable[[Any, Any, Any, boo
     xs, xk, vs, vk and a (rk4_begin_pair / rk4_stage_pair / rk4_finish_pair)."""
     rk4_begin_pair(x0, b["xs"], b["xk"], v0, b["vs"], b["vk"])
     accel(x0, v0, b["a"], True)
-    for w, c in ((1.0, h / 2), (2.0, h / 2), (2.0, h)):
-        rk4_stage_pair(x0, b["xs"], b["xk"], v0, b["vs"], b["vk"], b["a"], w, c)
+    for w, f in STAGES:
+        rk4_stage_pair(x0, b["xs"], b["xk"], v0, b["vs"], b["vk"], b["a"], w, f * h)
         accel(b["xs"], b["vs"], b["a"], False)
     rk4_finish_pair(x0, b["xk"], v0, b["vs"], b["vk"], b["a"], h / 6, r_out, v_out, bad)

@@ -14,8 +14,8 @@ Per replica and step s (state (x, v) in agent-id order):
      per-step schedule's per-agent sums, which sum in another order, so other bits); a
      cutoff is law.py's weight test, pair by pair (at this N cheaper than a cell list, and
      the same model);
-  3. semi-implicit Euler, or RK4 in integrate.py's stage order. A non-finite value stops
-     the replica and records the step.
+  3. semi-implicit Euler, or RK4 by integrate.py's stage_pair / finish_pair. A
+     non-finite value stops the replica and records the step.
 Covered up to FUSED_MAX_N agents (above it one replica's N^2 serial pairs outweigh the
 per-step schedule's launches).
 """
@@ -31,8 +31,8 @@ from flocklab.schemas import Scenario
 from ... import runtime
 from ...replicas import FusedBatch, host_array
 from ...space.cells import SPREAD
-from ...space.initial import unit_rows
-from ...space.integrate import nonfinite
+from ...space.frame import point_mass_frame
+from ...space.integrate import STAGES, finish_pair, nonfinite, stage_pair
 from ...space.params import Slots
 from . import law
 
@@ -121,19 +121,18 @@ def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
                 vs[i] = vel[i]
                 vk[i] = ti.Vector.zero(float, dim)
             for t in ti.static(range(3)):
-                w = 1.0 if t == 0 else 2.0
-                c = h if t == 2 else h / 2
-                for i in range(a0, a0 + n):  # integrate.py's stage order
-                    xk[i] += w * vs[i]
-                    xs[i] = pos[i] + c * vs[i]
-                    vk[i] += w * acc[i]
-                    vs[i] = vel[i] + c * acc[i]
+                w = ti.static(STAGES[t][0])
+                c = h * ti.static(STAGES[t][1])
+                for i in range(a0, a0 + n):
+                    xs[i], vs[i], xk[i], vk[i] = stage_pair(pos[i], vel[i], vs[i], acc[i],
+                                                            xk[i], vk[i], w, c)
                 accel(a0, n, q, xs, vs, acc, den)
             h6 = h / 6
             for i in range(a0, a0 + n):
-                pos[i] = pos[i] + h6 * (xk[i] + vs[i])
-                vel[i] = vel[i] + h6 * (vk[i] + acc[i])
-                bad |= nonfinite(pos[i], vel[i])
+                x, v = finish_pair(pos[i], vel[i], vs[i], acc[i], xk[i], vk[i], h6)
+                pos[i] = x
+                vel[i] = v
+                bad |= nonfinite(x, v)
         else:
             for i in range(a0, a0 + n):
                 x, v = law.euler(pos[i], vel[i], acc[i], h)
@@ -236,17 +235,8 @@ class CuckerSmaleBatch(FusedBatch):
 
     def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
         a0, a1 = self.aoff[b], self.aoff[b + 1]
-        out = {}
-        if "position" in arrays:
-            out["position"] = self.host("pos")[a0:a1]
-        if "velocity" in arrays or "heading" in arrays:
-            vel = self.host("vel")[a0:a1]
-            if "velocity" in arrays:
-                out["velocity"] = vel
-            if "heading" in arrays:
-                out["heading"] = (unit_rows(vel) if self.dim == 3
-                                  else np.arctan2(vel[:, 1], vel[:, 0]))
-        return out
+        return point_mass_frame(lambda: self.host("pos")[a0:a1],
+                                lambda: self.host("vel")[a0:a1], arrays, self.dim)
 
     def convergence_keys(self) -> list[str]:
         return ["velocity_diameter"]

@@ -18,7 +18,8 @@ from flocklab.schemas import Scenario
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real
-from ...space.initial import initial_state, unit_rows
+from ...space.frame import point_mass_frame
+from ...space.initial import initial_state
 from ...space.integrate import gather_rows, rk4_pair_step
 from ...space.plane_grid import PlaneGrid
 from ...space.state import SortedState, permute_all
@@ -114,17 +115,8 @@ class CuckerSmaleKernel(ModelKernel):
 
     def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
         ids = self.state.ids_numpy()
-        out = {}
-        if "position" in arrays:
-            out["position"] = self.state.in_id_order("pos", ids)
-        if "velocity" in arrays or "heading" in arrays:
-            vel = self.state.in_id_order("vel", ids)
-            if "velocity" in arrays:
-                out["velocity"] = vel
-            if "heading" in arrays:
-                out["heading"] = (unit_rows(vel) if self.dim == 3
-                                  else np.arctan2(vel[:, 1], vel[:, 0]))
-        return out
+        return point_mass_frame(lambda: self.state.in_id_order("pos", ids),
+                                lambda: self.state.in_id_order("vel", ids), arrays, self.dim)
 
     def save(self) -> dict[str, np.ndarray]:
         """Checkpoints: the state in its storage order with its ids."""

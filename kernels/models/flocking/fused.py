@@ -8,8 +8,7 @@ inside, the state kept in the kernel's arrays and the observables written into a
 per-replica buffer. A replica computes the same numbers alone, in a batch, or cut into
 any windows.
 
-Per replica and step s (state X(s) = (r, v[, R_i]) in agent-id order), semi-implicit
-Euler:
+Per replica and step s (state X(s) = (r, v[, R_i]) in agent-id order):
   1. switching/M3: a cell list of r(s) over its bounding box (cells of side R, the initial
      radius, which bounds every R_i, numbered x fastest, then y, then z; a stable counting
      sort, so every sum has one fixed order; hashed buckets of the same cells when the box
@@ -19,7 +18,10 @@ Euler:
   2. on an observation step, the observables of X(s) (one more visit: valencies, the
      union-find of the graph, the saturated potential, the closest pair);
   3. M3 at s > 0, s % radius_every == 0: the adaptive radius of eq. 4, synchronously;
-  4. u_i of eq. 3 (and paper 002's -grad V_i - c_d v_i), v' = v + dt u, r' = r + dt v'.
+  4. u_i of eq. 3 (and paper 002's -grad V_i - c_d v_i), v' = v + dt u, r' = r + dt v';
+     or RK4 (kernels/space/integrate.py's stage_pair / finish_pair, the per-step path's
+     sums): u at X(s), then at each stage state, for which step 1 (cells, slot copy, V_i)
+     is redone at the stage positions, so neighbours are re-evaluated at every stage.
      A non-finite value stops the replica and records the step.
 M2 and M3 run in 2D and 3D: the dimension `dim` is a compile-time parameter of the kernel
 (the law needs only |r_ij| and the vectors r_ij, v_ij, as in forces.py; paper 002's
@@ -39,7 +41,7 @@ eigvalsh at N <= 32). A window holding more observations than the buffer is cut 
 several launches, which never changes a bit.
 
 Not on this path (`FlockingBatch.batch_key` returns None; the per-step path runs them):
-the `rk4` integrator and M3's `radius_rule: "min"`.
+M3's `radius_rule: "min"`.
 """
 
 from functools import cache
@@ -54,10 +56,10 @@ from ... import runtime
 from ...replicas import FusedBatch, Snapshots
 from ...space.blocks import dense_cell, grid_row
 from ...space.cells import SPREAD
+from ...space.frame import point_mass_frame
 from ...space.graph import find_serial, union_serial
 from ...space.grid import put, runaway_cause, widen, within
-from ...space.initial import unit_rows
-from ...space.integrate import nonfinite
+from ...space.integrate import STAGES, finish_pair, nonfinite, stage_pair
 from ...space.observables import TWO_PI, make_circular_spread
 from ...space.params import Slots
 from ...space.replica_cells import G_NX, G_NY, G_NZ, G_O, G_SPAN, G_W, bucket, make_replica_cells
@@ -101,13 +103,19 @@ MISSION_KEYS = OBS[18:28]
 # The batch's arrays, in the kernel's argument order.
 ARRAYS = ("aoff", "coff", "ooff", "prm", "iprm", "pos", "vel", "rad", "ps", "cell", "cstart",
           "cidx", "parent", "csum", "mis", "arc_lo", "arc_hi", "ptr", "idx", "opos", "orad",
-          "ostart", "obs", "val", "snap", "sbase")
+          "ostart", "obs", "val", "snap", "sbase", "rk")
 
 
 def velocity_keys(dim: int) -> list[str]:
     """The velocity observables in the per-step path's order (observe.velocity_stats)."""
     means = [f"mean_velocity_{c}" for c in "xyz"[:dim]]
     return [*means, *OBS[3:9]]
+
+
+def rk_columns(dim: int) -> tuple[int, int, int, int, int]:
+    """rk's columns (RK4: the step's r(s), v(s), the sums of k for r and v, u at the last
+    stage), dim each."""
+    return 0, dim, 2 * dim, 3 * dim, 4 * dim
 
 
 def columns(dim: int) -> tuple[int, int, int, int, int]:
@@ -133,6 +141,13 @@ def _full(x, dim: ti.template()):
 def _row(a: ti.template(), i, c0: ti.template(), dim: ti.template()):
     """Columns c0 .. c0 + dim of row i of a, as a dim-vector of the float type."""
     return ti.Vector([a[i, c0 + c] for c in ti.static(range(dim))], dt=float)
+
+
+@ti.func
+def put_at(a: ti.template(), i, c0: ti.template(), x):
+    """Columns c0 .. c0 + x.n of row i of a = the vector x (_row's inverse)."""
+    for c in ti.static(range(x.n)):
+        a[i, c0 + c] = x[c]
 
 
 # The replica cell lists (kernels/space/replica_cells.py) of the state (hashed buckets past
@@ -331,13 +346,92 @@ def velocity_stats(row, a0, n, ps: ti.template(), lo: ti.template(), hi: ti.temp
     return 0.5 * kin
 
 
-@cache
-def advance_kernel(mode: int, dim: int = 2):
-    """The window kernel for one mode (fixed graph, switching (M2) or mission (M3)) and
-    dimension (2 or 3)."""
-    fixed = mode == MODES["fixed"]
+# The arrays of a window, as one compile-time tuple (its order: ARRAYS).
+(AOFF, COFF, OOFF, PRM, IPRM, POS, VEL, RADII, PS, CELL, CSTART, CIDX, PARENT, CSUM, MIS,
+ ARC_LO, ARC_HI, PTR, IDX, OPOS, ORAD, OSTART, OBS_ROWS, VAL, SNAP, SBASE, RKS) = range(
+    len(ARRAYS))
+
+
+@ti.func
+def cells_across(g):
+    return ti.math.ivec3(ti.cast(g[G_NX], ti.i32), ti.cast(g[G_NY], ti.i32),
+                         ti.cast(g[G_NZ], ti.i32))
+
+
+@ti.func
+def mission_observables(b, a0, n, row, q, prm: ti.template(), ps: ti.template(),
+                        parent: ti.template(), csum: ti.template(), mis: ti.template(),
+                        obs: ti.template(), dim: ti.template()):
+    """M3's observables of X(s) (ps in slot order, V_i in mis, the metric graph's
+    union-find forest in parent) into obs[row]: the mission potential, destination and
+    obstacle distances, the radii, Q's constant part and the per-component velocity
+    disagreement; returns sum_i V_i (eq. 5's mission part of Q)."""
+    X, V, RAD = ti.static(columns(dim)[0], columns(dim)[1], columns(dim)[2])
+    msum = 0.0
+    inside = 0
+    mmax = -ti.math.inf
+    omin = prm[b, P.OCAP]  # exact below the obstacle grid's cell; capped there
+    dmean = 0.0
+    dfar = 0.0
+    rmin = ti.math.inf
+    rmax = 0.0
+    rsum = 0.0
+    qc = 0.0
+    dest = ti.Vector([prm[b, DEST[c]] for c in ti.static(range(dim))], dt=float)
+    for k in range(a0, a0 + n):
+        vk = mis[k, 0]
+        msum += vk
+        if vk <= prm[b, P.VMIN]:
+            inside += 1
+        mmax = ti.max(mmax, vk)
+        omin = ti.min(omin, mis[k, dim + 1])
+        y = _row(ps, k, X, dim) - dest
+        dd = ti.sqrt(y.dot(y))
+        dmean += dd
+        dfar = ti.max(dfar, dd)
+        r = ps[k, RAD]
+        rmin = ti.min(rmin, r)
+        rmax = ti.max(rmax, r)
+        rsum += r
+        qc += potentials.value(r * r, q[2], q[3])
+        for c in ti.static(range(dim + 1)):
+            csum[k, c] = 0.0
+    obs[row, COL["q_constant"]] = 0.5 * (n - 1) * qc
+    obs[row, COL["destination_distance_mean"]] = dmean / n
+    obs[row, COL["destination_distance_max"]] = dfar
+    obs[row, COL["inside_vmin_fraction"]] = ti.cast(inside, float) / n
+    obs[row, COL["mission_potential_max"]] = mmax
+    obs[row, COL["obstacle_distance_min"]] = omin
+    obs[row, COL["radius_min"]] = rmin
+    obs[row, COL["radius_mean"]] = rsum / n
+    obs[row, COL["radius_max"]] = rmax
+    # Paper 002: each component synchronises on its own (csum: the velocity sum
+    # and member count of each component, at its root).
+    for k in range(a0, a0 + n):
+        root = find_serial(parent, k)
+        for c in ti.static(range(dim)):
+            csum[root, c] = csum[root, c] + ps[k, V + c]
+        csum[root, dim] = csum[root, dim] + 1.0
+    dev = 0.0
+    dev_max = 0.0
+    for k in range(a0, a0 + n):
+        root = find_serial(parent, k)
+        cnt = csum[root, dim]
+        e = _row(ps, k, V, dim) - _row(csum, root, 0, dim) / cnt
+        d2 = e.dot(e)
+        dev += d2
+        dev_max = ti.max(dev_max, d2)
+    obs[row, COL["velocity_disagreement_components"]] = dev
+    obs[row, COL["velocity_disagreement_components_max"]] = ti.sqrt(dev_max)
+    return msum
+
+
+def _pair_visits(mode: int, dim: int):
+    """The pair terms of a window (the law's, over slot k's candidates m, d = r_m - r_k)
+    and their visits: (pair_radius2, visit_force, visit_radius, visit_observe,
+    visit_closest)."""
     mission = mode == MODES["mission"]
-    X, V, RAD, HC, _ = columns(dim)
+    V, RAD = columns(dim)[1], columns(dim)[2]
 
     @ti.func
     def pair_radius2(k, q, ps: ti.template()):
@@ -391,7 +485,14 @@ def advance_kernel(mode: int, dim: int = 2):
     visit_radius = make_visit(radius_pair, dim)
     visit_observe = make_visit(observe_pair, dim)
     visit_closest = make_visit(closest_pair, dim, by_id=True)
-    state_grid, closest_grid = _cells[dim, True], _cells[dim, False]
+    return pair_radius2, visit_force, visit_radius, visit_observe, visit_closest
+
+
+def _closest_search(dim: int, visit_closest):
+    """The closest pair's search of a window: (closest_all_pairs, closest_cells,
+    write_closest)."""
+    X = columns(dim)[0]
+    closest_grid = _cells[dim, False]
 
     @ti.func
     def closest_all_pairs(a0, n, ps: ti.template()):
@@ -457,6 +558,15 @@ def advance_kernel(mode: int, dim: int = 2):
         obs[row, COL["min_distance"]] = ti.sqrt(best[0])
         obs[row, COL["min_pair_i"]] = ti.min(i, j) - a0
         obs[row, COL["min_pair_j"]] = ti.max(i, j) - a0
+
+    return closest_all_pairs, closest_cells, write_closest
+
+
+def _observers(mode: int, dim: int, pair_radius2, visit_observe, closest):
+    """The observation passes of a window: (observe_fixed, observe_metric)."""
+    mission = mode == MODES["mission"]
+    X, RAD = columns(dim)[0], columns(dim)[2]
+    closest_all_pairs, closest_cells, write_closest = closest
 
     @ti.func
     def observe_fixed(b, a0, n, c0, cap, row, prm: ti.template(), ps: ti.template(),
@@ -526,63 +636,8 @@ def advance_kernel(mode: int, dim: int = 2):
         obs[row, COL["components"]] = roots
         energy = 0.5 * pot + kin
         if ti.static(mission):
-            msum = 0.0
-            inside = 0
-            mmax = -ti.math.inf
-            omin = prm[b, P.OCAP]  # exact below the obstacle grid's cell; capped there
-            dmean = 0.0
-            dfar = 0.0
-            rmin = ti.math.inf
-            rmax = 0.0
-            rsum = 0.0
-            qc = 0.0
-            dest = ti.Vector([prm[b, DEST[c]] for c in ti.static(range(dim))], dt=float)
-            for k in range(a0, a0 + n):
-                vk = mis[k, 0]
-                msum += vk
-                if vk <= prm[b, P.VMIN]:
-                    inside += 1
-                mmax = ti.max(mmax, vk)
-                omin = ti.min(omin, mis[k, dim + 1])
-                y = _row(ps, k, X, dim) - dest
-                dd = ti.sqrt(y.dot(y))
-                dmean += dd
-                dfar = ti.max(dfar, dd)
-                r = ps[k, RAD]
-                rmin = ti.min(rmin, r)
-                rmax = ti.max(rmax, r)
-                rsum += r
-                qc += potentials.value(r * r, q[2], q[3])
-                for c in ti.static(range(dim + 1)):
-                    csum[k, c] = 0.0
-            energy += msum  # eq. 5: + sum_i V_i
-            obs[row, COL["q_constant"]] = 0.5 * (n - 1) * qc
-            obs[row, COL["destination_distance_mean"]] = dmean / n
-            obs[row, COL["destination_distance_max"]] = dfar
-            obs[row, COL["inside_vmin_fraction"]] = ti.cast(inside, float) / n
-            obs[row, COL["mission_potential_max"]] = mmax
-            obs[row, COL["obstacle_distance_min"]] = omin
-            obs[row, COL["radius_min"]] = rmin
-            obs[row, COL["radius_mean"]] = rsum / n
-            obs[row, COL["radius_max"]] = rmax
-            # Paper 002: each component synchronises on its own (csum: the velocity sum
-            # and member count of each component, at its root).
-            for k in range(a0, a0 + n):
-                root = find_serial(parent, k)
-                for c in ti.static(range(dim)):
-                    csum[root, c] = csum[root, c] + ps[k, V + c]
-                csum[root, dim] = csum[root, dim] + 1.0
-            dev = 0.0
-            dev_max = 0.0
-            for k in range(a0, a0 + n):
-                root = find_serial(parent, k)
-                cnt = csum[root, dim]
-                e = _row(ps, k, V, dim) - _row(csum, root, 0, dim) / cnt
-                d2 = e.dot(e)
-                dev += d2
-                dev_max = ti.max(dev_max, d2)
-            obs[row, COL["velocity_disagreement_components"]] = dev
-            obs[row, COL["velocity_disagreement_components_max"]] = ti.sqrt(dev_max)
+            energy += mission_observables(b, a0, n, row, q, prm, ps, parent, csum, mis, obs,
+                                          dim)  # eq. 5: + sum_i V_i
         else:
             obs[row, COL["q_constant"]] = prm[b, P.QC]
         obs[row, COL["energy"]] = energy
@@ -595,14 +650,154 @@ def advance_kernel(mode: int, dim: int = 2):
                 if ti.static(mission):
                     snap[at + dim] = ps[k, RAD]
 
-    # The arrays of a window, as one compile-time tuple (its order: ARRAYS).
-    (AOFF, COFF, OOFF, PRM, IPRM, POS, VEL, RADII, PS, CELL, CSTART, CIDX, PARENT, CSUM, MIS,
-     ARC_LO, ARC_HI, PTR, IDX, OPOS, ORAD, OSTART, OBS, VAL, SNAP, SBASE) = range(len(ARRAYS))
+    return observe_fixed, observe_metric
+
+
+def _motion(mode: int, dim: int, visit_force, visit_radius, load):
+    """The motion passes of a window: (adapt, move, move_rk4); `load` brings a stage
+    state into slot order as it does X(s)."""
+    fixed = mode == MODES["fixed"]
+    mission = mode == MODES["mission"]
+    X, V, RAD = columns(dim)[:3]
+    R0, V0, RK, VK, U = rk_columns(dim)
 
     @ti.func
-    def cells_across(g):
-        return ti.math.ivec3(ti.cast(g[G_NX], ti.i32), ti.cast(g[G_NY], ti.i32),
-                             ti.cast(g[G_NZ], ti.i32))
+    def adapt(b, a0, n, c0, g, q, A: ti.template()):
+        """M3's radius, paper 002 eq. 4 by the law, synchronously (reads the slot copy,
+        writes rad in id order, then the copy)."""
+        prm, iprm, rad, ps, cidx = ti.static(A[PRM], A[IPRM], A[RADII], A[PS], A[CIDX])
+        nc = cells_across(g)
+        halved = 0
+        grown = 0
+        for k in range(a0, a0 + n):
+            r = ps[k, RAD]
+            new = r
+            if law.stuck(_row(ps, k, V, dim), A[MIS][k, 0], prm[b, P.STUCK2], prm[b, P.VMIN]):
+                new = law.halved(r, prm[b, P.FLOOR])
+                if new < r:
+                    halved += 1
+            else:
+                new = visit_radius(k, a0, n, c0, nc[0], nc[1], nc[2], r, q, ps, A[CELL],
+                                   A[CSTART], cidx, ti.static((A[PARENT],)))
+                if new > r:
+                    grown += 1
+            rad[cidx[k]] = new
+        for k in range(a0, a0 + n):
+            ps[k, RAD] = rad[cidx[k]]
+        iprm[b, IP.HALVED] = iprm[b, IP.HALVED] + halved
+        iprm[b, IP.GROWN] = iprm[b, IP.GROWN] + grown
+
+    @ti.func
+    def control(b, k, a0, n, c0, nc, q, A: ti.template()):
+        """(i, r_i, v_i, u_i) of slot k by the law (u_i of eq. 3 [and paper 002's mission
+        terms]) from the slot-order copy ps (a fixed graph keeps id order: i = k)."""
+        iprm, ps, cidx, mis = ti.static(A[IPRM], A[PS], A[CIDX], A[MIS])
+        ptr, idx = ti.static(A[PTR], A[IDX])
+        i = k
+        if ti.static(not fixed):
+            i = cidx[k]
+        xi = _row(ps, k, X, dim)
+        vi = _row(ps, k, V, dim)
+        u = _full(0.0, dim)
+        if ti.static(fixed):
+            for e in range(ptr[i], ptr[i + 1]):
+                j = idx[e]
+                u = law.graph_term(u, _row(ps, j, X, dim) - xi, _row(ps, j, V, dim), vi, q[2])
+        else:
+            acc = visit_force(k, a0, n, c0, nc[0], nc[1], nc[2], _full(0.0, dim + 1), q,
+                              ps, A[CELL], A[CSTART], cidx, ti.static((A[PARENT],)))
+            u = law.control(acc, vi)
+        if ti.static(mission):
+            u = law.mission_control(u, vi, _row(mis, k, 1, dim), mis[k, 0],
+                                    iprm[b, IP.DAMP], A[PRM][b, P.VMIN], A[PRM][b, P.CD])
+        return i, xi, vi, u
+
+    @ti.func
+    def move(b, a0, n, c0, g, q, A: ti.template()):
+        """X(s + 1) by semi-implicit Euler, written in id order as we go: the visits read
+        only the slot-order copy, so the update stays synchronous. Returns 1 if a new state
+        is not finite."""
+        nc = cells_across(g)
+        dt = A[PRM][b, P.DT]
+        bad = 0
+        for k in range(a0, a0 + n):
+            i, xi, vi, u = control(b, k, a0, n, c0, nc, q, A)
+            x, v = law.euler(xi, vi, u, dt)
+            put(A[POS], i, x)
+            put(A[VEL], i, v)
+            bad |= nonfinite(x, v)
+        return bad
+
+    @ti.func
+    def forces(b, a0, n, c0, g, q, A: ti.template()):
+        """u_i at the state in ps into rk's U columns, in id order."""
+        nc = cells_across(g)
+        for k in range(a0, a0 + n):
+            i, _xi, _vi, u = control(b, k, a0, n, c0, nc, q, A)
+            put_at(A[RKS], i, U, u)
+
+    @ti.func
+    def move_rk4(b, s, a0, n, c0, cap, g, q, A: ti.template()):
+        """X(s + 1) by RK4 (integrate.py's stage_pair / finish_pair over STAGES), the
+        neighbours, cells and (M3) V_i re-evaluated at every stage: pos and vel hold the
+        stage state, which `load` brings into slot order as it does X(s); r(s), v(s), the
+        sums and u in rk (M3's R_i stays the step's, as on the per-step path). The four
+        evaluations of u are one runtime loop (one copy of the visits to compile). Returns
+        (bad, live): bad 1 if a stage or the new state is not finite; live 0 if a stage's
+        swarm ran away (recorded by `load`)."""
+        pos, vel, rk = ti.static(A[POS], A[VEL], A[RKS])
+        h = A[PRM][b, P.DT]
+        for i in range(a0, a0 + n):
+            put_at(rk, i, R0, _row(pos, i, 0, dim))
+            put_at(rk, i, V0, _row(vel, i, 0, dim))
+            put_at(rk, i, RK, _full(0.0, dim))
+            put_at(rk, i, VK, _full(0.0, dim))
+        bad = 0
+        live = 1
+        gs = g
+        for t in range(4):  # u at X(s), then at the stages after STAGES[t - 1]
+            if t > 0 and bad == 0 and live == 1:
+                w = ti.select(t == 1, STAGES[0][0], STAGES[1][0])
+                c = h * ti.select(t == 3, STAGES[2][1], STAGES[0][1])
+                for i in range(a0, a0 + n):
+                    xs, vs, xk, vk = stage_pair(_row(rk, i, R0, dim), _row(rk, i, V0, dim),
+                                                _row(vel, i, 0, dim), _row(rk, i, U, dim),
+                                                _row(rk, i, RK, dim), _row(rk, i, VK, dim),
+                                                w, c)
+                    put(pos, i, xs)
+                    put(vel, i, vs)
+                    put_at(rk, i, RK, xk)
+                    put_at(rk, i, VK, vk)
+                    bad |= nonfinite(xs, vs)
+                if bad == 0:
+                    live, gs = load(b, s, a0, n, c0, cap, A)
+            if bad == 0 and live == 1:
+                forces(b, a0, n, c0, gs, q, A)
+        if bad == 0 and live == 1:
+            for i in range(a0, a0 + n):
+                x, v = finish_pair(_row(rk, i, R0, dim), _row(rk, i, V0, dim),
+                                   _row(vel, i, 0, dim), _row(rk, i, U, dim),
+                                   _row(rk, i, RK, dim), _row(rk, i, VK, dim), h / 6)
+                put(pos, i, x)
+                put(vel, i, v)
+                bad |= nonfinite(x, v)
+        return bad, live
+
+    return adapt, move, move_rk4
+
+
+@cache
+def advance_kernel(mode: int, dim: int = 2, rk4: bool = False):
+    """The window kernel for one mode (fixed graph, switching (M2) or mission (M3)),
+    dimension (2 or 3) and integrator (semi-implicit Euler or RK4)."""
+    fixed = mode == MODES["fixed"]
+    mission = mode == MODES["mission"]
+    X, V, RAD, HC, _ = columns(dim)
+    pair_radius2, visit_force, visit_radius, visit_observe, visit_closest = _pair_visits(
+        mode, dim)
+    observe_fixed, observe_metric = _observers(
+        mode, dim, pair_radius2, visit_observe, _closest_search(dim, visit_closest))
+    state_grid = _cells[dim, True]
 
     @ti.func
     def load(b, s, a0, n, c0, cap, A: ti.template()):
@@ -653,79 +848,19 @@ def advance_kernel(mode: int, dim: int = 2):
         """The observables of X(s) into the replica's next row of obs."""
         iprm = ti.static(A[IPRM])
         row = A[OOFF][b] + iprm[b, IP.NOBS]
-        A[OBS][row, 0] = s
+        A[OBS_ROWS][row, 0] = s
         if ti.static(fixed):
             observe_fixed(b, a0, n, c0, cap, row, A[PRM], A[PS], A[PTR], A[IDX], A[CELL],
-                          A[CSTART], A[CIDX], A[ARC_LO], A[ARC_HI], A[OBS])
+                          A[CSTART], A[CIDX], A[ARC_LO], A[ARC_HI], A[OBS_ROWS])
         else:
             nc = cells_across(g)
             observe_metric(b, a0, n, c0, nc[0], nc[1], nc[2], g[G_W], row, iprm[b, IP.NOBS],
                            q, A[PRM], iprm, A[PS], A[CELL], A[CSTART], A[CIDX], A[PARENT],
-                           A[CSUM], A[ARC_LO], A[ARC_HI], A[MIS], A[OBS], A[VAL], A[SNAP],
+                           A[CSUM], A[ARC_LO], A[ARC_HI], A[MIS], A[OBS_ROWS], A[VAL], A[SNAP],
                            A[SBASE])
         iprm[b, IP.NOBS] = iprm[b, IP.NOBS] + 1
 
-    @ti.func
-    def adapt(b, a0, n, c0, g, q, A: ti.template()):
-        """M3's radius, paper 002 eq. 4 by the law, synchronously (reads the slot copy,
-        writes rad in id order, then the copy)."""
-        prm, iprm, rad, ps, cidx = ti.static(A[PRM], A[IPRM], A[RADII], A[PS], A[CIDX])
-        nc = cells_across(g)
-        halved = 0
-        grown = 0
-        for k in range(a0, a0 + n):
-            r = ps[k, RAD]
-            new = r
-            if law.stuck(_row(ps, k, V, dim), A[MIS][k, 0], prm[b, P.STUCK2], prm[b, P.VMIN]):
-                new = law.halved(r, prm[b, P.FLOOR])
-                if new < r:
-                    halved += 1
-            else:
-                new = visit_radius(k, a0, n, c0, nc[0], nc[1], nc[2], r, q, ps, A[CELL],
-                                   A[CSTART], cidx, ti.static((A[PARENT],)))
-                if new > r:
-                    grown += 1
-            rad[cidx[k]] = new
-        for k in range(a0, a0 + n):
-            ps[k, RAD] = rad[cidx[k]]
-        iprm[b, IP.HALVED] = iprm[b, IP.HALVED] + halved
-        iprm[b, IP.GROWN] = iprm[b, IP.GROWN] + grown
-
-    @ti.func
-    def move(b, a0, n, c0, g, q, A: ti.template()):
-        """X(s + 1) by the law (u_i of eq. 3 [and paper 002's mission terms], semi-implicit
-        Euler), written in id order as we go: the visits read only the slot-order copy,
-        so the update stays synchronous (a fixed graph keeps id order). Returns 1 if a
-        new state is not finite."""
-        prm, iprm, ps, cidx, mis = ti.static(A[PRM], A[IPRM], A[PS], A[CIDX], A[MIS])
-        ptr, idx = ti.static(A[PTR], A[IDX])
-        nc = cells_across(g)
-        dt = prm[b, P.DT]
-        bad = 0
-        for k in range(a0, a0 + n):
-            i = k
-            if ti.static(not fixed):
-                i = cidx[k]
-            xi = _row(ps, k, X, dim)
-            vi = _row(ps, k, V, dim)
-            u = _full(0.0, dim)
-            if ti.static(fixed):
-                for e in range(ptr[i], ptr[i + 1]):
-                    j = idx[e]
-                    u = law.graph_term(u, _row(ps, j, X, dim) - xi, _row(ps, j, V, dim), vi,
-                                       q[2])
-            else:
-                acc = visit_force(k, a0, n, c0, nc[0], nc[1], nc[2], _full(0.0, dim + 1), q,
-                                  ps, A[CELL], A[CSTART], cidx, ti.static((A[PARENT],)))
-                u = law.control(acc, vi)
-            if ti.static(mission):
-                u = law.mission_control(u, vi, _row(mis, k, 1, dim), mis[k, 0],
-                                        iprm[b, IP.DAMP], prm[b, P.VMIN], prm[b, P.CD])
-            x, v = law.euler(xi, vi, u, dt)
-            put(A[POS], i, x)
-            put(A[VEL], i, v)
-            bad |= nonfinite(x, v)
-        return bad
+    adapt, move, move_rk4 = _motion(mode, dim, visit_force, visit_radius, load)
 
     @ti.func
     def replica(b, s0, s1, A: ti.template()):
@@ -752,7 +887,13 @@ def advance_kernel(mode: int, dim: int = 2):
                     # Eq. 4 at its cadence, before the step's motion.
                     if iprm[b, IP.ADAPT] and s > 0 and s % iprm[b, IP.REVERY] == 0:
                         adapt(b, a0, n, c0, g, q, A)
-                if move(b, a0, n, c0, g, q, A) != 0:
+                if ti.static(rk4):
+                    bad, live = move_rk4(b, s, a0, n, c0, cap, g, q, A)
+                    if live == 0:
+                        break
+                    if bad != 0:
+                        iprm[b, IP.BAD] = s
+                elif move(b, a0, n, c0, g, q, A) != 0:
                     iprm[b, IP.BAD] = s
             s += 1
 
@@ -760,10 +901,11 @@ def advance_kernel(mode: int, dim: int = 2):
     def advance(s0: ti.i32, s1: ti.i32, aoff: nd, coff: nd, ooff: nd, prm: nd, iprm: nd,
                 pos: nd, vel: nd, rad: nd, ps: nd, cell: nd, cstart: nd, cidx: nd,
                 parent: nd, csum: nd, mis: nd, arc_lo: nd, arc_hi: nd, ptr: nd, idx: nd,
-                opos: nd, orad: nd, ostart: nd, obs: nd, val: nd, snap: nd, sbase: nd):
+                opos: nd, orad: nd, ostart: nd, obs: nd, val: nd, snap: nd, sbase: nd,
+                rk: nd):
         A = ti.static((aoff, coff, ooff, prm, iprm, pos, vel, rad, ps, cell, cstart, cidx,
                        parent, csum, mis, arc_lo, arc_hi, ptr, idx, opos, orad, ostart, obs,
-                       val, snap, sbase))
+                       val, snap, sbase, rk))
         for t in range((aoff.shape[0] - 1) * SPREAD):
             if t % SPREAD == 0:  # one replica per CPU task
                 replica(t // SPREAD, s0, s1, A)
@@ -852,7 +994,8 @@ class FlockingBatch(FusedBatch):
                      else first.model.topology)
         fixed, mission = self.mode == "fixed", self.mode == "mission"
         self.dim = dim = first.dimension
-        self.kernel = advance_kernel(MODES[self.mode], dim)
+        rk4 = first.model.integrator == "rk4"
+        self.kernel = advance_kernel(MODES[self.mode], dim, rk4)
         B = len(scenarios)
         ns = [s.n_agents for s in scenarios]
         self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
@@ -968,6 +1111,7 @@ class FlockingBatch(FusedBatch):
             obs=arr(np.zeros((int(self.ooff[-1]), N_OBS))),
             val=arr(np.zeros(max(voff, 1), dtype=np.int32), i32),
             snap=scratch(max(int(self.snaps.base[-1]), 1)), sbase=arr(self.snaps.base, i32),
+            rk=scratch((total if rk4 else 1, 5 * dim)),
         )
         assert tuple(self.args) == ARRAYS
 
@@ -1043,18 +1187,8 @@ class FlockingBatch(FusedBatch):
 
     def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
         a0, a1 = self.aoff[b], self.aoff[b + 1]
-        out = {}
-        if "position" in arrays:
-            out["position"] = self.host("pos")[a0:a1]
-        if "velocity" in arrays or "heading" in arrays:
-            vel = self.host("vel")[a0:a1]
-            if "velocity" in arrays:
-                out["velocity"] = vel
-            if "heading" in arrays and self.dim == 3:  # the unit velocity (N, 3)
-                out["heading"] = unit_rows(vel)
-            elif "heading" in arrays:
-                out["heading"] = np.arctan2(vel[:, 1], vel[:, 0])
-        return out
+        return point_mass_frame(lambda: self.host("pos")[a0:a1],
+                                lambda: self.host("vel")[a0:a1], arrays, self.dim)
 
     def convergence_keys(self) -> list[str]:
         return (["velocity_disagreement_components"] if self.mode == "mission"
@@ -1092,12 +1226,10 @@ class FlockingBatch(FusedBatch):
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:
-        """Scenarios with the same key share a launch; None (the per-step path) for the
-        rk4 integrator and M3's radius_rule "min"."""
+        """Scenarios with the same key share a launch; None (the per-step path) for M3's
+        radius_rule "min"."""
         p = scenario.model
-        if p.integrator != "semi_implicit_euler":
-            return None
         if p.kind == "flocking_obstacles":
             own = p.radius_rule == "own"
-            return ("flocking_obstacles", scenario.dimension) if own else None
-        return ("flocking", p.topology, scenario.dimension)
+            return ("flocking_obstacles", scenario.dimension, p.integrator) if own else None
+        return ("flocking", p.topology, scenario.dimension, p.integrator)

@@ -31,8 +31,9 @@ from flocklab.schemas import Scenario
 from ...model import ModelKernel, register_kernel
 from ...result import SimulationDiverged
 from ...runtime import DevicePolicy, as_real, wide
+from ...space.frame import point_mass_frame
 from ...space.graph import count_roots, flatten, reset_parent
-from ...space.initial import initial_state, unit_rows
+from ...space.initial import initial_state
 from ...space.integrate import gather_rows, rk4_pair_step
 from ...space.plane_grid import PlaneGrid
 from ...space.state import SortedState, permute_all
@@ -313,18 +314,8 @@ class Flock(ModelKernel):
 
     def frame(self, arrays: list[str]) -> dict[str, np.ndarray]:
         ids = self.state.ids_numpy()
-        out = {}
-        if "position" in arrays:
-            out["position"] = self.state.in_id_order("pos", ids)
-        if "velocity" in arrays or "heading" in arrays:
-            vel = self.state.in_id_order("vel", ids)
-            if "velocity" in arrays:
-                out["velocity"] = vel
-            if "heading" in arrays and self.dim == 3:  # the unit velocity (N, 3)
-                out["heading"] = unit_rows(vel)
-            elif "heading" in arrays:
-                out["heading"] = np.arctan2(vel[:, 1], vel[:, 0])
-        return out
+        return point_mass_frame(lambda: self.state.in_id_order("pos", ids),
+                                lambda: self.state.in_id_order("vel", ids), arrays, self.dim)
 
     def save(self) -> dict[str, np.ndarray]:
         """Checkpoints: the sorted state with its ids, the closest approach so far and

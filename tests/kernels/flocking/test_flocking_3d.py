@@ -63,15 +63,16 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
-# RK4 and the grid stay fast in per_step-fixed-rk4 and the switching-grid-64 cases.
-@pytest.mark.slow_cases("per_step-switching-grid-rk4")
+# RK4 and the grid stay fast in per_step-fixed-rk4 and the switching-grid-64 cases (fused RK4
+# against its reference in 2D: test_flocking_reference.py).
+@pytest.mark.slow_cases("per_step-switching-grid-rk4", "fused-switching-grid-rk4",
+                        "fused-fixed-rk4")
 def test_matches_brute_force_step_by_step(taichi_cpu, path, case):
-    """On both engine paths (RK4 has only the per-step one)."""
+    """On both engine paths, Euler and RK4."""
     sc = scenario(**case)
     sink = Frames()
     result = kernels.run(sc, sink=sink)
-    want = "per_step" if sc.model.integrator == "rk4" else path
-    assert result.status == "completed" and result.extra["engine_path"] == want
+    assert result.status == "completed" and result.extra["engine_path"] == path
     a, _ = sc.model.potential.coefficients()
     R = None if sc.neighbours is None else sc.neighbours.radius
     adj = ring(sc.n_agents) if sc.model.topology == "fixed" else None
@@ -148,16 +149,16 @@ def m3_scenario(steps=150, search="auto", **model) -> Scenario:
                          ids=["own", "min-grid", "rk4-kappa2"])
 # Minutes of Python reference in 3D; radius_rule "min" on the grid and RK4 stay fast in 2D
 # (test_flocking_reference.py, test_obstacles.py).
-@pytest.mark.slow_cases("per_step-min-grid", "per_step-rk4-kappa2")
+@pytest.mark.slow_cases("per_step-min-grid", "per_step-rk4-kappa2", "fused-rk4-kappa2")
 def test_obstacles_match_brute_force_step_by_step(taichi_cpu, path, case):
-    """On both engine paths (RK4 and radius_rule "min" have only the per-step one)."""
+    """On both engine paths (radius_rule "min" has only the per-step one)."""
     from tests.kernels.flocking.test_flocking_reference import M3Ref
 
     sc = m3_scenario(**case)
     p = sc.model
     sink = Frames()
     result = kernels.run(sc, sink=sink)
-    fused = p.integrator != "rk4" and p.radius_rule == "own"
+    fused = p.radius_rule == "own"
     want = path if fused else "per_step"
     assert result.status == "completed" and result.extra["engine_path"] == want
     ref = M3Ref(p, sc.neighbours.radius, sc.inclusive)

@@ -120,6 +120,20 @@ MIXES = {
 }
 
 
+def as_rk4(sc: Scenario) -> Scenario:
+    spec = sc.model_dump(mode="json")
+    spec["model"]["integrator"] = "rk4"
+    return Scenario.model_validate(spec)
+
+
+# The same mixes under RK4 (the fused kernels of their own): cells rebuilt at every stage.
+for _mode in ("fixed", "switching", "mission", "switching-3d", "mission-3d"):
+    MIXES[f"{_mode}-rk4"] = [as_rk4(sc) for sc in MIXES[_mode]]
+# Each RK4 mode compiles its own kernel: the 2D switching one stays in the fast lane.
+SLOW_RK4 = ("fixed-rk4", "mission-rk4", "switching-3d-rk4", "mission-3d-rk4")
+SLOW_BATCH_RK4 = ("switching-rk4", *SLOW_RK4)  # its agreement case stays fast
+
+
 def same_result(a, b):
     assert a.status == b.status and a.steps == b.steps
     assert list(a.observables) == list(b.observables)
@@ -130,6 +144,7 @@ def same_result(a, b):
 
 
 @pytest.mark.parametrize("mode", list(MIXES))
+@pytest.mark.slow_cases(*SLOW_BATCH_RK4)
 def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, mode):
     scenarios = MIXES[mode]
     together = kernels.run_batch(scenarios)
@@ -149,10 +164,10 @@ AGREEMENT["mission-3d-adaptive"] = MIXES["mission-3d"][0]
 
 @pytest.mark.parametrize("case", list(AGREEMENT))
 # Its own kernels (most of a minute); missions in 3D stay fast in mission-3d.
-@pytest.mark.slow_cases("mission-3d-obstacle-lattice")
+@pytest.mark.slow_cases("mission-3d-obstacle-lattice", *SLOW_RK4)
 def test_the_fused_path_agrees_with_the_per_step_path(taichi_cpu, monkeypatch, case):
     """Every observable, the extras and the frames, to rounding (the summation order
-    differs)."""
+    differs), Euler and RK4 alike."""
     sc = with_recording(AGREEMENT[case], every=10)
     fused_sink, step_sink = Frames(), Frames()
     fused = kernels.run(sc, sink=fused_sink)
@@ -221,12 +236,12 @@ def test_the_path_is_chosen_from_the_scenario_alone(taichi_cpu):
     min_rule = m3_scenario(n=5, steps=1, radius_rule="min")
     assert engine.schedule(euler, "cpu")[1] is flocking_fused.FlockingBatch
     assert engine.schedule(MIXES["mission"][0], "cpu")[1] is flocking_fused.FlockingBatch
-    assert engine.choose_path(rk4, "cpu") == "per_step"
+    assert engine.schedule(rk4, "cpu")[1] is flocking_fused.FlockingBatch
     assert engine.choose_path(min_rule, "cpu") == "per_step"
     assert engine.choose_path(euler, "cuda") == "per_step"
     mixed = [euler, rk4, MIXES["fixed"][0], euler, MIXES["mission"][0]]
     assert sorted(map(sorted, engine._batches(mixed))) == [[0, 3], [1], [2], [4]]
-    assert kernels.run(rk4).extra["engine_path"] == "per_step"
+    assert kernels.run(rk4).extra["engine_path"] == "fused"
     # 3D: M2 and M3 fused, in launches of their own, apart from 2D
     flat = MIXES["switching"][0]
     deep = MIXES["switching-3d"][0]
