@@ -65,6 +65,8 @@ CASES = [
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
 # RK4 and the grid stay fast in per_step-fixed-rk4 and the switching-grid-64 cases.
 @pytest.mark.slow_cases("per_step-switching-grid-rk4")
+@pytest.mark.fast_cases("fused-switching-grid-64", "fused-fixed", "per_step-switching-all_pairs",
+                        "per_step-fixed-rk4")
 def test_matches_brute_force_step_by_step(taichi_cpu, path, case):
     """On both engine paths (RK4 has only the per-step one)."""
     sc = scenario(**case)

@@ -50,6 +50,11 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()))
+# Each case compiles kernels of its own (seconds, 3D the most): the fast lane keeps a few
+# covering every option on each schedule; --all runs every case.
+@pytest.mark.fast_cases("fused-eta=0.0", "fused-eta=1.3-L=None-move=new_heading",
+                        "per_step-eta=2.5-inclusive=False", "per_step-eta=0.9-L=2.5",
+                        "per_step-eta=6.283185307179586-L=None-N=40")
 def test_matches_brute_force_step_by_step(taichi_cpu, path, case):
     sc = scenario(**case)
     result, sink = run_frames(sc)
