@@ -1,5 +1,7 @@
 """Fixtures for the client tests: the real service in this process (the real app, store
-and workers: tests/service/inproc.py), reached through the client's `transport=` seam."""
+and workers: tests/service/inproc.py), reached through the client's `transport=` seam.
+`server` is the session's shared one (tests/conftest.py, the service tests' too);
+`strict_server` has settings of its own."""
 
 from __future__ import annotations
 
@@ -24,11 +26,6 @@ def start(data_dir, env: dict[str, str]) -> Iterator[InProcessServer]:
         yield s
     finally:
         s.stop()
-
-
-@pytest.fixture(scope="session")
-def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
-    yield from start(tmp_path_factory.mktemp("client") / "data", {})
 
 
 @pytest.fixture(scope="session")

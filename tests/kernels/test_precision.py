@@ -34,6 +34,10 @@ def f32(sc: Scenario) -> Scenario:
     return Scenario.model_validate({**sc.model_dump(mode="json"), "precision": "float32"})
 
 
+# float32 runtimes (and a thread count's) reset Taichi: this module runs after the others.
+pytestmark = pytest.mark.resets_taichi
+
+
 @pytest.fixture(scope="module", autouse=True)
 def back_to_float64():
     """Other test modules build kernels on the session's float64 runtime directly: leave
@@ -57,6 +61,12 @@ VICSEK_CASES = [vk.CASES[k] for k in (0, 1, 3, 4, 5, 8, 9, 10, 11)]
 @pytest.mark.slow_cases("fused-rule=leader-L=None-leader_heading=0.7",
                         "fused-rule=laplacian-g=100.0-L=None-inclusive=False",
                         "per_step-rule=laplacian-g=100.0-L=None-inclusive=False")
+# The fast lane: each rule once, fused on the vicsek and average rules (each float32 variant
+# compiles for seconds); --all runs the rest.
+@pytest.mark.fast_cases("fused-rule=vicsek-eta=0.0", "fused-rule=average-eta=0.2-N=30-L=None",
+                        "per_step-rule=vicsek-eta=0.4-L=None-move=new_heading",
+                        "per_step-rule=laplacian-g=61.0",
+                        "per_step-rule=leader-eta=0.3-leader_heading=-1.0")
 def test_vicsek_float32_matches_reference_step_by_step(path, case):
     sc = f32(vk.scenario(**case))
     result, sink = vk.run_frames(sc)
@@ -113,6 +123,8 @@ M2_CASES = [fr.M2_CASES[k] for k in (0, 1, 3, 5, 6)]
 @pytest.mark.parametrize("case", M2_CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
 # The fixed graph stays fast on per_step, the switching grid on fused.
 @pytest.mark.slow_cases("fused-fixed", "per_step-switching-grid")
+@pytest.mark.fast_cases("fused-switching-grid", "per_step-fixed-rk4-{'kind': 'ring'}",
+                        "per_step-switching-all_pairs")
 def test_flocking_float32_matches_reference_step_by_step(path, case):
     sc = f32(fr.m2_scenario(**case, steps=60))
     a, _ = sc.model.potential.coefficients()
@@ -135,6 +147,7 @@ M3_CASES = [fr.M3_CASES[k] for k in (0, 2, 6, 9)]
 @pytest.mark.parametrize("case", M3_CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
 # The grid stays fast on fused; RK4 in float32 in the flocking test above.
 @pytest.mark.slow_cases("per_step-grid", "per_step-rk4-3-grid")
+@pytest.mark.fast_cases("fused-grid", "per_step-all_pairs")
 def test_obstacles_float32_matches_reference_step_by_step(path, case):
     sc = f32(fr.m3_scenario(**dict(case), steps=60))
     ref = fr.M3Ref(sc.model, sc.neighbours.radius, sc.inclusive)
@@ -149,6 +162,8 @@ def test_obstacles_float32_matches_reference_step_by_step(path, case):
 
 
 @pytest.mark.parametrize("name", list(fm.CASES))
+@pytest.mark.fast_cases("fused-F1-linear-rotate", "per_step-F2-linear-stops",
+                        "per_step-F1-linear-rk4-rotate")
 def test_formation_float32_matches_reference_step_by_step(path, name):
     m = fm.CASES[name]
     sc = f32(fm.scenario(m, obs_every=40))

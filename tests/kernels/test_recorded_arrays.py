@@ -213,6 +213,7 @@ def test_recording_degree_leaves_the_trajectory_alone(taichi_cpu):
             assert np.array_equal(a["position"], b["position"])
 
 
+@pytest.mark.resets_taichi  # float32
 def test_h5md_holds_degree_and_radius(taichi_cpu, tmp_path):
     sc = recording(m3_scenario(n=14, steps=20, neighbour_search="grid"),
                    ["position", "degree", "radius"], 10, precision="float32")
@@ -284,6 +285,7 @@ def test_the_command_records_degree_at_a_wide_radius(tmp_path):
     assert "cannot record radius" in bad.stderr + bad.stdout
 
 
+@pytest.mark.resets_taichi
 def test_float32_runs_record_their_own_counts(taichi_cpu):
     """precision float32: the degree is the float32 engine's count (the observables'), and
     the radius comes in the engine's float type."""

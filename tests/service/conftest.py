@@ -1,7 +1,8 @@
 """Fixtures for the service tests: the real app with real SQLite stores and real spawned
 Taichi workers (no mocks), in this process over `httpx.ASGITransport` (`server`, `http`,
 `make_app`: tests/service/inproc.py) or as real `flocklab serve` processes on 127.0.0.1
-(`real_server`, `make_server`) for what needs a socket or a process to kill."""
+(`real_server`, `make_server`) for what needs a socket or a process to kill. The shared
+in-process `server` is in tests/conftest.py: the client tests use the same one."""
 
 from __future__ import annotations
 
@@ -29,17 +30,6 @@ TEST_ENV = {
     "FLOCKLAB_MAX_JSON_BYTES": str(256 * 1024),
     "FLOCKLAB_THREADS_PER_WORKER": "1",
 }
-
-
-@pytest.fixture(scope="session")
-def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
-    """One shared service for the tests that do not need special settings: the real app,
-    store and workers in this process."""
-    s = InProcessServer(tmp_path_factory.mktemp("shared") / "data", TEST_ENV).start()
-    try:
-        yield s
-    finally:
-        s.stop()
 
 
 @pytest.fixture(scope="session")

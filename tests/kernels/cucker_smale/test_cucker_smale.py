@@ -68,6 +68,11 @@ def params(sc: Scenario) -> dict:
                 normalization=p.normalization, cutoff=p.cutoff)
 
 
+# The fast lane keeps a pairwise covering set: every two values of any two parameters meet
+# in some fast case (each case compiles kernels of its own; the whole grid runs with --all).
+@pytest.mark.fast_cases("2-mean-None-semi_implicit_euler-per_step", "3-mean-1.3-rk4-fused",
+                        "2-sum-1.3-rk4-per_step", "3-sum-None-semi_implicit_euler-fused",
+                        "2-local-None-rk4-fused", "3-local-1.3-semi_implicit_euler-per_step")
 @pytest.mark.parametrize("path", ["per_step", "fused"])
 @pytest.mark.parametrize("integrator", ["semi_implicit_euler", "rk4"])
 @pytest.mark.parametrize("cutoff", [None, 1.3])

@@ -63,10 +63,10 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
-# RK4 and the grid stay fast in per_step-fixed-rk4 and the switching-grid-64 cases (fused RK4
-# against its reference in 2D: test_flocking_reference.py).
-@pytest.mark.slow_cases("per_step-switching-grid-rk4", "fused-switching-grid-rk4",
-                        "fused-fixed-rk4")
+# RK4 and the grid stay fast in per_step-fixed-rk4 and the switching-grid-64 cases.
+@pytest.mark.slow_cases("per_step-switching-grid-rk4")
+@pytest.mark.fast_cases("fused-switching-grid-64", "fused-fixed", "per_step-switching-all_pairs",
+                        "per_step-fixed-rk4")
 def test_matches_brute_force_step_by_step(taichi_cpu, path, case):
     """On both engine paths, Euler and RK4."""
     sc = scenario(**case)

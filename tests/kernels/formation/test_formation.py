@@ -151,10 +151,11 @@ CASES = {
 
 
 @pytest.mark.parametrize("name", list(CASES))
-# per_step keeps F1-linear-rotate, F2-linear-stops and F1-linear-rk4-rotate in the fast lane;
-# the fused twins of these three run fast.
-@pytest.mark.slow_cases("per_step-F1-quadratic-morph", "per_step-F1-saturating",
-                        "per_step-F2-quadratic-rk4")
+# Each case compiles kernels of its own (seconds): the fast lane keeps every case once, on
+# one schedule (per_step: F2-linear-stops and F1-linear-rk4-rotate); --all runs both.
+@pytest.mark.fast_cases("fused-F1-linear-rotate", "fused-F1-quadratic-morph",
+                        "fused-F1-saturating", "fused-F2-quadratic-rk4",
+                        "per_step-F2-linear-stops", "per_step-F1-linear-rk4-rotate")
 def test_matches_brute_force_step_by_step(path, name):
     m = CASES[name]
     sc = scenario(m, obs_every=40)

@@ -125,11 +125,11 @@ CASES = {
 
 
 @pytest.mark.parametrize("name", list(CASES))
-# F2-quadratic-rk4 takes minutes in 3D (it stays fast in 2D, test_formation.py); per_step
-# keeps F1-linear-rotate-axis, F2-linear-stops and F1-linear-rk4-rotate here.
-@pytest.mark.slow_cases("fused-F2-quadratic-rk4", "per_step-F2-quadratic-rk4",
-                        "per_step-F1-quadratic-morph-cube-to-shell",
-                        "per_step-F1-saturating-rotate-z")
+# F2-quadratic-rk4 takes minutes in 3D (it stays fast in 2D, test_formation.py); each other
+# case stays fast once, on one schedule (3D kernels compile for seconds); --all runs both.
+@pytest.mark.fast_cases("fused-F1-linear-rotate-axis", "fused-F1-quadratic-morph-cube-to-shell",
+                        "fused-F1-saturating-rotate-z", "per_step-F2-linear-stops",
+                        "per_step-F1-linear-rk4-rotate")
 def test_matches_brute_force_step_by_step(path, name):
     sc, result, sink = run(doc(CASES[name]))
     assert result.status == "completed", result.error

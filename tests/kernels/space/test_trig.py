@@ -10,6 +10,7 @@ from flocklab.kernels import runtime
 from flocklab.kernels.space import trig
 
 
+@pytest.mark.resets_taichi  # float32 re-initialises Taichi
 @pytest.mark.parametrize("precision", ["float64", "float32"])
 def test_cos_sin_within_one_ulp_of_libm(precision):
     runtime.ensure("cpu", 2, precision)

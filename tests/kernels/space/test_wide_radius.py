@@ -107,6 +107,10 @@ def check_graph_observables(result, frames, r: float, inclusive: bool) -> None:
 
 @pytest.mark.parametrize("rule", ["vicsek", "average"])
 @pytest.mark.parametrize("frac", FRACTIONS[2], ids=lambda f: f"r={f:.4f}L")
+# Every radius once in the fast lane, each rule on each schedule; --all runs the grid.
+@pytest.mark.fast_cases("fused-r=0.3337L-vicsek", "per_step-r=0.5000L-average",
+                        "fused-r=0.6000L-average", "per_step-r=0.7000L-vicsek",
+                        "fused-r=0.7071L-vicsek")
 def test_vicsek_2d_matches_the_minimum_image_reference(path, frac, rule):
     r = frac * L
     sc = vicsek(2, r, rule=rule, eta=0.8 if rule == "vicsek" else 0.3)

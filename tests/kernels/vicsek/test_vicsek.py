@@ -73,9 +73,16 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()))
-# The fused path keeps one case of each rule in the fast lane; per_step keeps them all.
-@pytest.mark.slow_cases("fused-rule=leader-L=None-leader_heading=0.7",
-                        "fused-rule=average-eta=0.2-N=30-L=None")
+# Each fused variant compiles for seconds: the fast lane keeps the fused path on the
+# vicsek rule (periodic, the small-N all-pairs visit, the plane) and every rule per step;
+# --all runs every case on both schedules.
+@pytest.mark.fast_cases("fused-rule=vicsek-eta=0.0", "fused-rule=vicsek-eta=0.9-N=30",
+                        "fused-rule=vicsek-eta=0.4-L=None-move=new_heading",
+                        "per_step-rule=vicsek-eta=0.9-L=2.5", "per_step-rule=average",
+                        "per_step-rule=average-eta=0.2-N=30-L=None",
+                        "per_step-rule=laplacian-g=100.0-L=None-inclusive=False",
+                        "per_step-rule=leader-L=None-leader_heading=0.7",
+                        "per_step-rule=leader-eta=0.3-leader_heading=-1.0")
 def test_matches_brute_force_step_by_step(path, case):
     sc = scenario(**case)
     _, sink = run_frames(sc)
@@ -156,6 +163,7 @@ def test_same_seed_same_trajectory_bit_for_bit(path):
 
 
 @pytest.mark.slow_cases("per_step")  # Taichi restarts per thread count; fused stays
+@pytest.mark.resets_taichi
 def test_thread_count_does_not_change_the_trajectory(path):
     base = scenario(eta=1.0, N=3000, L=25.0, steps=10)
     one = run_frames(base.model_copy(update={"threads": 1}))[1]

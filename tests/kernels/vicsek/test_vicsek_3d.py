@@ -50,6 +50,14 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()))
+# A 3D kernel variant (schedule, box or plane, per step: inclusiveness) compiles for
+# seconds: the fast lane keeps every case fused and the plane's per step (its other cases
+# share those variants); --all runs the periodic per-step ones too.
+@pytest.mark.fast_cases("fused-eta=0.0", "fused-eta=0.9", "fused-eta=2.5-inclusive=False",
+                        "fused-eta=0.9-L=2.5", "fused-eta=1.3-L=None-move=new_heading",
+                        "fused-eta=6.283185307179586-L=None-N=40",
+                        "per_step-eta=1.3-L=None-move=new_heading",
+                        "per_step-eta=6.283185307179586-L=None-N=40")
 def test_matches_brute_force_step_by_step(taichi_cpu, path, case):
     sc = scenario(**case)
     result, sink = run_frames(sc)

@@ -38,6 +38,10 @@ def mix(rule: str, periodic: bool, **kw):
 
 @pytest.mark.parametrize("rule", ["vicsek", "average", "laplacian", "leader"])
 @pytest.mark.parametrize("L", [True, None], ids=["periodic", "plane"])
+# Each rule's fused kernel compiles for seconds: every rule stays fast in a box, the plane
+# with the vicsek rule; --all runs the plane with every rule.
+@pytest.mark.fast_cases("periodic-vicsek", "periodic-average", "periodic-laplacian",
+                        "periodic-leader", "plane-vicsek")
 def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, rule, L):
     scenarios = mix(rule, bool(L), every=0)
     together = kernels.run_batch(scenarios)

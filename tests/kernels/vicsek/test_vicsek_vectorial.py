@@ -60,6 +60,13 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()))
+# Each case compiles kernels of its own (seconds, 3D the most): the fast lane keeps a few
+# covering every option on each schedule; --all runs every case.
+@pytest.mark.fast_cases("fused-dim=2", "fused-dim=3-L=None-eta=0.5-N=40",
+                        "per_step-dim=2-eta=0.0-move=old_heading",
+                        "per_step-dim=2-eta=1.7-inclusive=False-N=30",
+                        "per_step-dim=2-L=2.5-eta=0.8",
+                        "per_step-dim=3-L=4.0-eta=2.0-inclusive=False-move=old_heading")
 def test_matches_brute_force_step_by_step(taichi_cpu, path, case):
     sc = scenario(**case)
     sink = Frames()
