@@ -4,8 +4,8 @@ public API shows an empty diff. Run: python bench/openapi_dump.py OUT.json."""
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
 import tempfile
 from pathlib import Path
 
@@ -21,9 +21,10 @@ def openapi_text() -> str:
 
 
 def main() -> None:
-    if len(sys.argv) != 2:
-        sys.exit("usage: python bench/openapi_dump.py OUT.json")
-    Path(sys.argv[1]).write_text(openapi_text())
+    parser = argparse.ArgumentParser(description="Write the service's OpenAPI document as "
+                                     "stable JSON (keys sorted), for diffing two versions.")
+    parser.add_argument("out", type=Path, help="the JSON file to write")
+    parser.parse_args().out.write_text(openapi_text())
 
 
 if __name__ == "__main__":
