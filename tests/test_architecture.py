@@ -190,6 +190,7 @@ def _show(found: list[Edge]) -> str:
     return "\n".join(f"{e.source} -> {e.target} ({e.where}, line {e.line})" for e in found)
 
 
+@pytest.mark.slow
 def test_the_walk_sees_every_kind_of_import():
     """The pass finds module-level, TYPE_CHECKING and lazy imports (else every rule below
     would pass vacuously)."""

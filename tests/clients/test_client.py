@@ -32,6 +32,7 @@ def test_importing_clients_loads_neither_taichi_nor_fastapi():
     assert out.strip() == "[]"
 
 
+@pytest.mark.slow
 def test_submit_wait_and_fetch_results(server, tmp_path, capsys):
     sc = Scenario.model_validate_json(json.dumps(scenario(n=80, steps=20, every=5)))
     with clients.Client(server.url, transport=server.transport) as c:
@@ -119,6 +120,7 @@ def test_wait_timeout_then_cancel(server):
         assert job.data["cancel_requested"] is True
 
 
+@pytest.mark.slow
 def test_auth_queue_limit_and_expiry_errors(strict_server):
     with clients.Client(strict_server.url, transport=strict_server.transport) as anonymous:
         with pytest.raises(clients.Unauthorized):
@@ -168,6 +170,7 @@ def test_async_client(server):
     asyncio.run(main())
 
 
+@pytest.mark.slow
 def test_a_failed_job_carries_its_problem_typed(server):
     # Two agents at one point: the pair force is infinite at the first step.
     body = {"model": {"kind": "flocking"}, "space": {"kind": "plane"},

@@ -84,8 +84,7 @@ CASES["f2-3d-per_step"] = (f2_3d(), "per_step")
 @pytest.mark.parametrize("case", list(CASES))
 # Each case compiles its formation kernels (seconds): the fast lane keeps F1 and F2, 2D and
 # 3D, both schedules and RK4; --all runs every case.
-@pytest.mark.fast_cases("f1-2d-fused", "f2-2d-per_step", "f1-2d-morphs-rk4-fused",
-                        "f1-3d-rk4-per_step", "f2-3d-fused")
+@pytest.mark.fast_cases("f1-2d-fused", "f1-2d-morphs-rk4-fused", "f2-3d-fused")
 def test_a_stopped_formation_run_resumes_to_the_uninterrupted_bits(tmp_path, capsys, case):
     data, path = CASES[case]
     ref = tmp_path / "ref"
@@ -100,6 +99,7 @@ def test_a_stopped_formation_run_resumes_to_the_uninterrupted_bits(tmp_path, cap
     assert_same_run(ref, out)
 
 
+@pytest.mark.slow
 def test_dense_regime_counters_resume(tmp_path, capsys):
     """Euler steps coarse-grained (N = 300 in a small box, a low cap): the counters of
     the dense regime the summary reports go on from the checkpoint's."""

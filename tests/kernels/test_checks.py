@@ -69,6 +69,7 @@ def test_rounding_is_not_a_rise(precision, held):
     assert check["held"] is held and check["rises"] == (0 if held else 1)
 
 
+@pytest.mark.slow
 def test_command_warns_and_summary_says_so(tmp_path):
     sc = tmp_path / "stiff.json"
     sc.write_text(json.dumps(m2(0.05, 0.7, 2.0)))

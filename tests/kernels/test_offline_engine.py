@@ -4,6 +4,8 @@ client id to Taichi's web server) must not start in a flocklab process."""
 import subprocess
 import sys
 
+import pytest
+
 PROBE = r"""
 import threading
 started = []
@@ -24,6 +26,7 @@ print("THREADS", started)
 """
 
 
+@pytest.mark.slow
 def test_no_version_check_thread():
     out = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True,
                          timeout=300)
@@ -32,6 +35,7 @@ def test_no_version_check_thread():
     assert "try_check_version" not in line, line
 
 
+@pytest.mark.slow
 def test_version_check_is_what_the_probe_sees():
     """The probe would see the thread if the setting were off (so the test above can fail)."""
     probe = PROBE.replace("from flocklab import kernels",

@@ -123,8 +123,7 @@ M2_CASES = [fr.M2_CASES[k] for k in (0, 1, 3, 5, 6)]
 @pytest.mark.parametrize("case", M2_CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
 # The fixed graph stays fast on per_step, the switching grid on fused.
 @pytest.mark.slow_cases("fused-fixed", "per_step-switching-grid")
-@pytest.mark.fast_cases("fused-switching-grid", "per_step-fixed-rk4-{'kind': 'ring'}",
-                        "per_step-switching-all_pairs")
+@pytest.mark.fast_cases("per_step-fixed-rk4-{'kind': 'ring'}", "per_step-switching-all_pairs")
 def test_flocking_float32_matches_reference_step_by_step(path, case):
     sc = f32(fr.m2_scenario(**case, steps=60))
     a, _ = sc.model.potential.coefficients()
@@ -147,7 +146,7 @@ M3_CASES = [fr.M3_CASES[k] for k in (0, 2, 6, 9)]
 @pytest.mark.parametrize("case", M3_CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
 # The grid stays fast on fused; RK4 in float32 in the flocking test above.
 @pytest.mark.slow_cases("per_step-grid", "per_step-rk4-3-grid")
-@pytest.mark.fast_cases("fused-grid", "per_step-all_pairs")
+@pytest.mark.fast_cases("per_step-all_pairs")
 def test_obstacles_float32_matches_reference_step_by_step(path, case):
     sc = f32(fr.m3_scenario(**dict(case), steps=60))
     ref = fr.M3Ref(sc.model, sc.neighbours.radius, sc.inclusive)
@@ -194,7 +193,8 @@ DETERMINISM = {
 
 @pytest.mark.parametrize("family", list(DETERMINISM))
 # Each family stays fast on one path (Taichi restarts per thread count: seconds each).
-@pytest.mark.slow_cases("fused-flocking", "per_step-vicsek", "fused-formation")
+@pytest.mark.slow_cases("fused-flocking", "per_step-vicsek", "fused-formation", "fused-vicsek",
+                        "per_step-formation")
 def test_float32_same_seed_same_bits_alone_in_a_batch_and_on_any_threads(path, family):
     base = DETERMINISM[family]().model_dump(mode="json")
     alone = kernels.run(Scenario.model_validate({**base, "precision": "float32"}))
@@ -209,6 +209,7 @@ def test_float32_same_seed_same_bits_alone_in_a_batch_and_on_any_threads(path, f
     assert _bits(alone) == _bits(batch[1]) == _bits(one)
 
 
+@pytest.mark.slow
 def test_a_sweep_may_mix_precisions(monkeypatch):
     """Runs of either precision in one run_batch: each equals its run alone, and the two
     precisions really differ (float32's rounding shows in the observables)."""
@@ -235,6 +236,7 @@ def test_float32_noise_stays_below_one():
     assert np.all((u64 - u >= 0) & (u64 - u < 2.0**-24))
 
 
+@pytest.mark.slow_cases("fused")
 def test_float32_inclusive_radius_keeps_pairs_exactly_at_r(path):
     """Two agents exactly r apart (r = 0.75: r^2 exact in float32): neighbours when
     inclusive (the fused path's d2 < next float32 above r^2; a float64 nextafter would
@@ -289,6 +291,7 @@ def test_an_unknown_precision_is_refused():
                                  "precision": "float16"})
 
 
+@pytest.mark.slow_cases("laplacian-6.0", "vicsek-None", "average-None")
 @pytest.mark.parametrize("rule, L", [("average", None), ("vicsek", None), ("laplacian", 6.0)])
 def test_a_float64_run_after_a_float32_one_of_the_same_kernel_is_float64(rule, L,
                                                                          monkeypatch):

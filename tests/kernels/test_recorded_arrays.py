@@ -213,6 +213,7 @@ def test_recording_degree_leaves_the_trajectory_alone(taichi_cpu):
             assert np.array_equal(a["position"], b["position"])
 
 
+@pytest.mark.slow
 @pytest.mark.resets_taichi  # float32
 def test_h5md_holds_degree_and_radius(taichi_cpu, tmp_path):
     sc = recording(m3_scenario(n=14, steps=20, neighbour_search="grid"),
@@ -257,6 +258,7 @@ def test_missing_derived_arrays_are_refused(spec, message):
     assert [e.loc for e in field_errors(info.value)] == ["recording.arrays"]
 
 
+@pytest.mark.slow
 def test_the_command_records_degree_at_a_wide_radius(tmp_path):
     """`flocklab run` end to end: a periodic Vicsek run with r = 0.6 L (beyond L/2) writes
     the degrees into trajectory.h5; `flocklab validate` names a refused array and exits 2."""
@@ -285,6 +287,7 @@ def test_the_command_records_degree_at_a_wide_radius(tmp_path):
     assert "cannot record radius" in bad.stderr + bad.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.resets_taichi
 def test_float32_runs_record_their_own_counts(taichi_cpu):
     """precision float32: the degree is the float32 engine's count (the observables'), and

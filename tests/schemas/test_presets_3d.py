@@ -4,11 +4,13 @@ instead of the preset's 1.5, Q rose from t = 3 s and speeds reached 10^3: a stif
 configuration that the Euler step could not resolve, and a preset that showed it.)"""
 
 import numpy as np
+import pytest
 
 from flocklab import kernels
 from flocklab.schemas import Scenario, get_preset
 
 
+@pytest.mark.slow
 def test_tjp_switching_3d_keeps_q_non_increasing(taichi_cpu):
     spec = get_preset("tjp-switching-3d").model_dump(mode="json")
     spec["time"]["steps"] = 800  # 8 s: past where R = 2 first let Q rise (t = 3 s)

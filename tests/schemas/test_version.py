@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import h5py
+import pytest
 
 import flocklab
 from flocklab.clients import _core
@@ -47,6 +48,7 @@ def test_the_service_and_the_client_report_it(tmp_path):
     assert _core.headers(None)["User-Agent"] == f"flocklab-client/{VERSION}"
 
 
+@pytest.mark.slow
 def test_run_and_sweep_folders_record_it(tmp_path):
     scenario = tmp_path / "s.json"
     scenario.write_text(json.dumps(TINY))

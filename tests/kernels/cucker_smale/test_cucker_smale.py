@@ -122,6 +122,7 @@ def test_mean_velocity_is_conserved(dim, normalization, path):
     assert obs["velocity_diameter"][-1] < 0.5 * obs["velocity_diameter"][0]
 
 
+@pytest.mark.slow_cases("100.0-mean-rk4-per_step", "100.0-sum-rk4-per_step")
 @pytest.mark.parametrize("path", ["per_step", "fused"])
 @pytest.mark.parametrize("integrator", ["semi_implicit_euler", "rk4"])
 @pytest.mark.parametrize("normalization", ["mean", "sum"])

@@ -46,6 +46,8 @@ def preset(name: str, **recording) -> Scenario:
 
 # --- paper 000's properties -----------------------------------------------------------------
 
+@pytest.mark.slow_cases("fused-switching-all_pairs-rk4", "fused-switching-grid",
+                        "per_step-switching-grid")
 @pytest.mark.parametrize("case", [
     dict(topology="fixed"),
     dict(topology="fixed", integrator="rk4", graph={"kind": "path"}),
@@ -68,6 +70,7 @@ def energy_series(sc: Scenario, key: str) -> np.ndarray:
     return np.array([k.observe(step)[key] for step, k in run_states(sc)])
 
 
+@pytest.mark.slow
 def test_fixed_energy_never_increases(taichi_cpu):
     """dW/dt = -v^T (L x I) v <= 0 (eq. 8). RK4 at dt = 0.005 has a per-step error of order
     dt^5 ~ 1e-12 times the force scale, so W may not rise by more than 1e-9 in any step
@@ -78,6 +81,7 @@ def test_fixed_energy_never_increases(taichi_cpu):
     assert w[0] - w[-1] > 10.0  # it does dissipate (35.6 -> 21.1 here)
 
 
+@pytest.mark.slow
 def test_switching_q_never_increases(taichi_cpu):
     """dQ/dt <= 0 for the saturated potential (eq. 10-12). Q is continuous across a switch
     while u jumps, so a step straddling a switch has a larger error; the bound is the same
@@ -99,6 +103,7 @@ def test_switching_q_never_increases(taichi_cpu):
     assert np.any(np.diff(np.array(valency), axis=0) != 0)  # the topology did switch
 
 
+@pytest.mark.slow_cases("fused")
 def test_tree_settles_at_potential_minimiser(path):
     """Corollary 1: on a tree every edge length converges to the minimiser d of V."""
     d = 1.3
@@ -111,6 +116,7 @@ def test_tree_settles_at_potential_minimiser(path):
     np.testing.assert_allclose(lengths, d, atol=1e-6)
 
 
+@pytest.mark.slow_cases("fused")
 def test_complete_graph_synchronises_faster_than_path(path):
     """Corollary 2: more algebraic connectivity, faster velocity synchronisation. The
     potential terms act as disturbances (the complete graph's distances are frustrated, so

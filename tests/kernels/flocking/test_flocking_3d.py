@@ -149,7 +149,8 @@ def m3_scenario(steps=150, search="auto", **model) -> Scenario:
                          ids=["own", "min-grid", "rk4-kappa2"])
 # Minutes of Python reference in 3D; radius_rule "min" on the grid and RK4 stay fast in 2D
 # (test_flocking_reference.py, test_obstacles.py).
-@pytest.mark.slow_cases("per_step-min-grid", "per_step-rk4-kappa2", "fused-rk4-kappa2")
+@pytest.mark.slow_cases("per_step-min-grid", "per_step-rk4-kappa2", "fused-rk4-kappa2", "fused-own",
+                        "per_step-own")
 def test_obstacles_match_brute_force_step_by_step(taichi_cpu, path, case):
     """On both engine paths (radius_rule "min" has only the per-step one)."""
     from tests.kernels.flocking.test_flocking_reference import M3Ref

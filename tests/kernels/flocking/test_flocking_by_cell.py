@@ -64,8 +64,8 @@ def outputs(k, blocks: bool) -> list[np.ndarray]:
 # cases stay fast; ties at the radius stay fast in vicsek/test_vicsek_by_cell.py and the
 # grid tests, radius_rule "min" in test_flocking_reference.py. M3's by-cell kernels (30 s
 # of CPU compiling, the fast lane's largest case) run with --all.
-@pytest.mark.slow_cases("m2-2d-inclusive-ties", "m2-3d-inclusive-ties", "m3-2d-min",
-                        "m3-2d-own")
+@pytest.mark.slow_cases("m2-2d-inclusive-ties", "m2-3d-inclusive-ties", "m3-2d-min", "m3-2d-own",
+                        "m2-2d", "m2-3d", "m2-3d-crowded")
 def test_by_cell_kernels_equal_the_per_agent_ones_bit_for_bit(case):
     sc = CASES[case]()
     rt = kernels.runtime.ensure("cpu")

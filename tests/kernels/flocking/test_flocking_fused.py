@@ -186,6 +186,7 @@ def test_the_fused_path_agrees_with_the_per_step_path(taichi_cpu, monkeypatch, c
             np.testing.assert_allclose(f[k], g[k], rtol=1e-9, atol=1e-12, err_msg=k)
 
 
+@pytest.mark.slow_cases("mission-3d")
 @pytest.mark.parametrize("mode", ["switching", "switching-3d", "mission-3d"])
 def test_windows_frames_and_snapshot_launches_do_not_change_a_bit(taichi_cpu, monkeypatch,
                                                                     fixed_windows, mode):

@@ -18,6 +18,10 @@ from tests.selection import counted, run, with_observables
 FRAMES = {"arrays": ["position", "velocity"], "every": 10}
 
 
+@pytest.mark.slow_cases("mission-3d-per_step", "mission-3d-rk4-fused", "mission-3d-rk4-per_step",
+                        "mission-per_step", "mission-rk4-fused", "mission-rk4-per_step",
+                        "switching-3d-per_step", "switching-3d-rk4-fused",
+                        "switching-3d-rk4-per_step", "switching-per_step", "switching-rk4-per_step")
 @pytest.mark.parametrize("path", ["fused", "per_step"], indirect=True)
 @pytest.mark.parametrize("mode", list(MIXES))
 def test_every_reported_observable_is_declared(taichi_cpu, path, mode):

@@ -299,10 +299,7 @@ M2_CASES = [
 @pytest.mark.fast_cases("fused-fixed", "fused-fixed-{'kind': 'tree', 'branching': 3}-0.8",
                         "fused-switching-grid", "fused-switching-all_pairs",
                         "per_step-fixed-rk4-{'kind': 'ring'}", "fused-fixed-rk4-{'kind': 'ring'}",
-                        "per_step-switching-hash",
-                        "per_step-switching-rk4-True-1.6-grid",
-                        "per_step-switching-rk4-True-1.6-hash",
-                        "per_step-switching-rk4-True-1.6-all_pairs",
+                        "per_step-switching-hash", "per_step-switching-rk4-True-1.6-all_pairs",
                         "per_step-switching-40-2.5-1.3-1.2-1.0-grid")
 def test_m2_matches_reference_step_by_step(path, case):
     sc = m2_scenario(**case)
@@ -349,9 +346,7 @@ M3_CASES = [
 @pytest.mark.parametrize("case", M3_CASES, ids=lambda c: "-".join(f"{v}" for v in c.values()))
 # As M2's above: fused on what it runs, per_step on the rest and on each search.
 @pytest.mark.fast_cases("fused-grid", "fused-2.0-everywhere", "fused-False-[]-[]-grid",
-                        "per_step-hash", "per_step-all_pairs", "per_step-min-below_vmin-grid",
-                        "per_step-min-hash", "per_step-rk4-3-grid", "per_step-rk4-3-hash",
-                        "per_step-rk4-3-all_pairs")
+                        "per_step-all_pairs")
 def test_m3_matches_reference_step_by_step(path, case):
     sc = m3_scenario(**dict(case))
     p = sc.model

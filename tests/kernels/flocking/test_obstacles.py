@@ -99,6 +99,7 @@ def test_obstacle_grid_matches_brute_force(taichi_cpu):
     assert near.sum() > 200
 
 
+@pytest.mark.slow_cases("per_step")
 def test_obstacle_preset_reaches_the_destination(path):
     """Paper 002, section V: every vehicle ends inside the V_min level set around (0, 0),
     with no vehicle-vehicle or vehicle-obstacle collision on the way."""
@@ -136,6 +137,7 @@ def test_every_count_at_the_step_cap_runs(path):
     assert result.observables["radius_min"].tolist() == [R, R]  # eq. 4 never ran
 
 
+@pytest.mark.slow_cases("fused")
 def test_stuck_pair_halves_then_recovers_its_radius(path):
     """A constructed stuck case for eq. 4. Agent 0 sits at the destination, agent 1 at rest
     where the mission pull balances the pair repulsion (2 s / (1 + s^2)^2 = 2/s^3 - 2/s,
@@ -177,6 +179,7 @@ def test_stuck_pair_halves_then_recovers_its_radius(path):
     assert k.extra()["adaptive_radius"] == {"halvings": 2, "increases": 2}  # two cycles in 10 s
 
 
+@pytest.mark.slow_cases("per_step-min", "per_step-own")
 @pytest.mark.parametrize("rule", ["own", "min"])
 def test_m3_observables_match_brute_force(path, rule):
     sc = m3_scenario(n=14, steps=60, radius_rule=rule, neighbour_search="grid")

@@ -127,9 +127,8 @@ CASES = {
 @pytest.mark.parametrize("name", list(CASES))
 # F2-quadratic-rk4 takes minutes in 3D (it stays fast in 2D, test_formation.py); each other
 # case stays fast once, on one schedule (3D kernels compile for seconds); --all runs both.
-@pytest.mark.fast_cases("fused-F1-linear-rotate-axis", "fused-F1-quadratic-morph-cube-to-shell",
-                        "fused-F1-saturating-rotate-z", "per_step-F2-linear-stops",
-                        "per_step-F1-linear-rk4-rotate")
+@pytest.mark.fast_cases("fused-F1-quadratic-morph-cube-to-shell", "fused-F1-saturating-rotate-z",
+                        "per_step-F2-linear-stops", "per_step-F1-linear-rk4-rotate")
 def test_matches_brute_force_step_by_step(path, name):
     sc, result, sink = run(doc(CASES[name]))
     assert result.status == "completed", result.error
@@ -403,6 +402,7 @@ def test_3d_only_parts_are_refused_in_2d(model, words):
 # --- the command line, outputs, preset and example ----------------------------------------
 
 
+@pytest.mark.slow
 def test_run_writes_a_3d_formation_trajectory(tmp_path):
     spec = doc({"formation": {"kind": "named", "shape": "shell"}, "path": STRAIGHT},
                N=10, steps=20, every=10, obs_every=10)
@@ -450,6 +450,7 @@ def test_the_3d_example_is_the_preset_and_keeps_its_shell(taichi_cpu):
     assert f["min_distance"] > 0.99 * D
 
 
+@pytest.mark.slow
 def test_d3_in_3d_scales_to_large_components():
     # One component of 2 x 10^5 directions spread over the sphere surrounds r^; cut by the
     # plane z = 0 it does not; 10^5 lone agents do not. (The primal LP needed a K x K matrix.)

@@ -94,6 +94,7 @@ class Frames:
         self.frames.append(arrays)
 
 
+@pytest.mark.slow_cases("rk4-3")
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("integrator", ["euler", "rk4"])
 def test_a_batch_gives_each_replica_its_bits_alone(taichi_cpu, fixed_windows, integrator,
@@ -171,6 +172,7 @@ def test_divergence_stops_only_its_replica(taichi_cpu):
     assert len(res[2].observables["step"]) == res[2].steps
 
 
+@pytest.mark.slow_cases("runaway-rk4-3")
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("integrator", ["euler", "rk4"])
 @pytest.mark.parametrize("case", ["runaway", "coincident"])

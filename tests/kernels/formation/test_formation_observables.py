@@ -40,6 +40,7 @@ def test_3d_f2_without_d3_skips_its_lp_and_keeps_every_bit(taichi_cpu, monkeypat
     assert lp[0] >= len(full.observables["D3"])
 
 
+@pytest.mark.slow_cases("2-per_step", "3-per_step")
 @pytest.mark.parametrize("path", ["fused", "per_step"], indirect=True)
 @pytest.mark.parametrize("dim", [2, 3])
 def test_a_batch_reports_each_replica_its_own_selection(taichi_cpu, path, dim):

@@ -33,6 +33,7 @@ def sim1(engine_path):
     return result.observables
 
 
+@pytest.mark.slow_cases("per_step")
 def test_sim1_speeds_match_the_leader_outside_the_rotation(sim1):
     """Fig. 5(b): about 5 s after the start the speeds equal the leader's, except while the
     formation rotates ([8, 12] s, plus the agents' own lag behind the rotation: ~3/k s)."""
@@ -46,6 +47,7 @@ def test_sim1_speeds_match_the_leader_outside_the_rotation(sim1):
     assert dev[tm < 2.0].min() > 0.05  # and so does the start: the test can fail
 
 
+@pytest.mark.slow_cases("per_step")
 def test_sim1_agents_stop_after_the_leader(sim1):
     o, t = sim1, sim1["time"]
     q = o["leader_speed"][t < 20.0].max()
@@ -67,6 +69,7 @@ def test_sim1_formation_reached_rotated_and_v1_decreasing(sim1):
     assert o["min_distance"].min() > 1.0
 
 
+@pytest.mark.slow_cases("per_step")
 def test_sim2_tracks_a_curved_path_in_formation(engine_path):
     """Figs. 6-7: with f(s) = 0.02 (s^2 + s) the group keeps its formation along the spline,
     trailing by about the lag |a| of eq. 8, at about the leader's speed."""
@@ -84,6 +87,7 @@ def test_sim2_tracks_a_curved_path_in_formation(engine_path):
     assert o["min_distance"].min() > 10.0
 
 
+@pytest.mark.slow_cases("per_step")
 def test_sim3_ends_in_an_f2_formation(engine_path):
     """Fig. 8: F2 with N = 100 ends in an F2 formation around the target (D1-D3), and V2
     (eq. 16) never increases once the leader is still."""

@@ -237,6 +237,7 @@ def test_no_noise_and_k_at_least_n_aligns_in_one_step():
     assert result.final["polarization"] == pytest.approx(1.0, abs=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.resets_taichi  # Taichi restarts per thread count
 def test_same_seed_same_bits_whatever_the_threads():
     base = scenario(N=3000, L=30.0, eta=1.0, steps=8, symmetric=True)

@@ -162,7 +162,7 @@ def test_same_seed_same_trajectory_bit_for_bit(path):
     assert not (a.theta[-1] == c.theta[-1]).all()
 
 
-@pytest.mark.slow_cases("per_step")  # Taichi restarts per thread count; fused stays
+@pytest.mark.slow_cases("per_step", "fused")
 @pytest.mark.resets_taichi
 def test_thread_count_does_not_change_the_trajectory(path):
     base = scenario(eta=1.0, N=3000, L=25.0, steps=10)

@@ -33,7 +33,7 @@ def same_frames(a: Frames, b: Frames) -> None:
 @pytest.mark.parametrize("L", [True, None], ids=["periodic", "plane"])
 # Each rule's batched and fused kernels compile for seconds (9 s of CPU a rule): the vicsek
 # and leader rules stay fast in the box, the plane with the vicsek rule; --all runs all.
-@pytest.mark.fast_cases("periodic-vicsek", "periodic-leader", "plane-vicsek")
+@pytest.mark.fast_cases("periodic-vicsek", "plane-vicsek")
 def test_batched_gives_the_fused_bits_alone_and_together(taichi_cpu, rule, L):
     scenarios = mix(rule, bool(L), every=7, track_linked_intervals=True)
     (fused, fs), (batched, bs) = both(scenarios[1])

@@ -86,6 +86,9 @@ CASES = [
 ]
 
 
+@pytest.mark.slow_cases("3-3.5-random-300-1.0-False-old_heading",
+                        "3-4.0-ties-0-0.0-True-new_heading",
+                        "3-5.3-crowded-400-6.0-False-new_heading")
 @pytest.mark.parametrize("case", CASES, ids=lambda c: "-".join(map(str, c)))
 def test_by_cell_step_equals_the_per_agent_step_bit_for_bit(case):
     dim, L, layout, n, eta, inclusive, move = case
@@ -127,6 +130,7 @@ def random_box(dim, L, n, eta, steps, seed, recording=None) -> Scenario:
     })
 
 
+@pytest.mark.slow_cases("3")
 @pytest.mark.parametrize("dim", [2, 3])
 def test_observing_every_step_leaves_the_trajectory_unchanged(dim):
     """Observed steps take the per-agent visit (with the graph), the others the by-cell

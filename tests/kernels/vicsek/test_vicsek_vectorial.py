@@ -87,6 +87,7 @@ def test_matches_brute_force_step_by_step(taichi_cpu, path, case):
     assert dim == pos.shape[1]
 
 
+@pytest.mark.slow_cases("2-3.5-random-200", "3-4.0-ties-0", "3-5.3-crowded-400")
 @pytest.mark.parametrize("dim,L,layout,n", [(2, 3.5, "random", 200), (2, 5.0, "ties", 0),
                                             (3, 4.0, "ties", 0), (3, 5.3, "crowded", 400)])
 def test_by_cell_step_counts_the_neighbourhood_as_the_per_agent_step(taichi_cpu, dim, L,
@@ -105,6 +106,7 @@ def test_by_cell_step_counts_the_neighbourhood_as_the_per_agent_step(taichi_cpu,
     assert not np.array_equal(angular[1], got[1])
 
 
+@pytest.mark.slow_cases("3")
 @pytest.mark.parametrize("dim", [2, 3])
 def test_batched_and_fused_schedules_give_the_same_bits(taichi_cpu, dim):
     scs = [scenario(dim=dim, N=n, eta=eta, seed=s, steps=30)

@@ -66,6 +66,7 @@ def _hold(port: int, source: str, n: int) -> list[socket.socket]:
     return socks
 
 
+@pytest.mark.slow
 def test_one_client_at_its_cap_leaves_others_served(fair):
     # The hostile client tries for the whole global cap; it gets its own share only.
     held = _hold(fair.port, "127.0.0.2", CAP)
@@ -96,6 +97,7 @@ def test_one_client_at_its_cap_leaves_others_served(fair):
     assert _status(raw) == 200
 
 
+@pytest.mark.slow
 def test_event_streams_of_one_client_leave_others_served(fair):
     """Event streams are responses: the deadlines never cut them, the per-client cap
     bounds how many one client holds."""
@@ -121,6 +123,7 @@ def test_event_streams_of_one_client_leave_others_served(fair):
             http.post(f"/v1/jobs/{job['id']}/cancel")
 
 
+@pytest.mark.slow
 def test_healthz_answers_when_many_clients_fill_the_cap(fair):
     """Past the global cap only /healthz gets in (the headroom), one request each."""
     clients = [f"127.0.1.{i}" for i in range(1, CAP // PER_CLIENT + 1)]

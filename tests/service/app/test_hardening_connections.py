@@ -66,6 +66,7 @@ def _problem(raw: bytes, status: int) -> dict:
     return problem
 
 
+@pytest.mark.slow
 def test_slow_headers_get_408_and_the_cap_answers_503(guarded):
     socks = [_connect(guarded.port) for _ in range(CAP - 1)]
     try:
@@ -117,6 +118,7 @@ def test_keep_alive_then_a_stalled_second_request_is_closed(guarded):
         assert _problem(_read_all(s), 408)["type"].endswith("request-timeout")
 
 
+@pytest.mark.slow
 def test_idle_keep_alive_is_bounded_by_keep_alive_not_the_header_timeout(guarded):
     """Between requests the keep-alive setting (5 s) applies, not the 1 s header limit."""
     with _connect(guarded.port) as s:
@@ -127,6 +129,7 @@ def test_idle_keep_alive_is_bounded_by_keep_alive_not_the_header_timeout(guarded
         assert _read_response(s).startswith(b"HTTP/1.1 200 ")
 
 
+@pytest.mark.slow
 def test_a_stream_outlives_the_request_timeouts(guarded):
     """The deadlines bound a request's arrival, never its response."""
     with httpx.Client(base_url=guarded.url, timeout=30) as http:

@@ -111,6 +111,7 @@ def test_an_unexpected_error_is_a_problem_and_keeps_the_connection(failing_app):
         assert b"connection: close" not in head.lower()
 
 
+@pytest.mark.slow
 def test_a_corrupted_result_500_keeps_the_connection(real_server, real_http):
     http = real_http
     job = wait_for(http, submit(http, {"scenario": scenario()})["id"])
@@ -156,6 +157,7 @@ def test_threads_are_capped_at_the_workers_cpus_and_reported(server, http):
         assert threads < 64, threads
 
 
+@pytest.mark.slow
 def test_long_metrics_are_streamed(real_http):
     http = real_http  # uvicorn's chunked transfer encoding
     job = wait_for(http, submit(http, {"scenario": scenario(n=10, steps=1500, every=0)})["id"])

@@ -154,6 +154,7 @@ def test_observables_a_model_does_not_report_are_422_naming_them(http):
     assert _job_count(http) == before
 
 
+@pytest.mark.slow
 def test_a_run_reports_the_observables_it_names(http):
     """A formation F2 job naming three observables (D3 left out) returns those alone."""
     job = submit(http, {"preset": "xi-abed-sim3", "overrides": {

@@ -24,6 +24,7 @@ def flocklab(*args, stdin=None):
                           text=True, input=stdin, timeout=300)
 
 
+@pytest.mark.slow
 def test_run_writes_every_artifact(tmp_path):
     path = tmp_path / "s.json"
     path.write_text(json.dumps(SMALL))

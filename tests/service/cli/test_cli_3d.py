@@ -14,6 +14,7 @@ SMALL_3D = copy.deepcopy(SMALL)
 SMALL_3D["space"] = {"kind": "periodic", "L": 5.0, "dimension": 3}
 
 
+@pytest.mark.slow
 def test_run_writes_a_3d_trajectory(tmp_path):
     path = tmp_path / "s.json"
     path.write_text(json.dumps(SMALL_3D))
@@ -35,6 +36,7 @@ def test_run_writes_a_3d_trajectory(tmp_path):
         assert np.allclose(np.linalg.norm(head, axis=2), 1.0)
 
 
+@pytest.mark.slow
 def test_render_draws_a_3d_snapshot_and_plots_its_observables(tmp_path):
     """`flocklab render` of a 3D run: its last frame through the 3D camera (every agent),
     and its observables (tests/service/render/test_render_3d.py: the pictures themselves)."""

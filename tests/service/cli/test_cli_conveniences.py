@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import h5py
+import pytest
 
 from flocklab.schemas import MODELS
 from flocklab.service.cli_models import REFERENCES
@@ -70,6 +71,7 @@ def test_validate_warns_when_no_frames_are_recorded(tmp_path):
     assert quiet.returncode == 0 and "warning" not in quiet.stderr
 
 
+@pytest.mark.slow
 def test_ctrl_c_keeps_what_the_run_computed(tmp_path):
     """SIGINT (what Ctrl-C sends) stops the run between steps; the folder lands with
     status `interrupted`, the frames and observables so far, and exit code 1."""

@@ -147,6 +147,7 @@ def check_ovito(run: Path, frames: list[gsd.hoomd.Frame]) -> None:
         np.testing.assert_allclose(data.cell[:d, 3], -np.asarray(f.configuration.box[:d]) / 2)
 
 
+@pytest.mark.slow_cases("2")
 @pytest.mark.parametrize("dimension", [2, 3])
 def test_periodic_vicsek_gsd_equals_h5md_and_opens_in_ovito_and_freud(tmp_path, dimension):
     scenario = vicsek(dimension)
@@ -211,6 +212,7 @@ def test_gsd_alone_keeps_observables_in_h5_and_frames_in_gsd(tmp_path):
     assert proc.returncode == 2 and "holds no frames" in proc.stderr
 
 
+@pytest.mark.slow
 def test_convert_bad_input_is_one_line_and_exit_2(tmp_path):
     execute_to_dir(vicsek(2), tmp_path / "run")
     (tmp_path / "empty").mkdir()

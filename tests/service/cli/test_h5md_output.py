@@ -47,6 +47,7 @@ def test_no_image_when_frames_are_too_far_apart(taichi_cpu, tmp_path):
         assert "image" not in f["particles/swarm"] and "position" in f["particles/swarm"]
 
 
+@pytest.mark.slow
 def test_float32_and_gzip_frames(taichi_cpu, tmp_path):
     execute_to_dir(fast_vicsek(), tmp_path / "f64")
     execute_to_dir(fast_vicsek(precision="float32", compression="gzip"), tmp_path / "f32")

@@ -21,6 +21,7 @@ def _scenario(**model) -> dict:
     return sc
 
 
+@pytest.mark.slow
 def test_a_cucker_smale_job_runs_and_is_drawn(http: httpx.Client):
     job = submit(http, {"scenario": _scenario()})
     done = wait_for(http, job["id"], timeout=120)

@@ -49,6 +49,7 @@ def _wait_running(http: httpx.Client, job_id: str) -> dict:
     raise AssertionError("job never made progress")
 
 
+@pytest.mark.slow
 def test_kill_9_mid_job_then_restart_loses_and_duplicates_nothing(make_server, tmp_path):
     data = tmp_path / "data"
     s1 = make_server(data_dir=data)
@@ -89,6 +90,7 @@ def test_a_second_service_on_the_same_data_dir_is_refused(make_app, tmp_path):
     assert "another flocklab service" in second.log_path.read_text()
 
 
+@pytest.mark.slow
 def test_graceful_restart_requeues_without_using_an_attempt(make_server, tmp_path):
     data = tmp_path / "data"
     s1 = make_server(data_dir=data)
@@ -104,6 +106,7 @@ def test_graceful_restart_requeues_without_using_an_attempt(make_server, tmp_pat
     assert done["status"] == "succeeded" and done["attempts"] == 1
 
 
+@pytest.mark.slow
 def test_a_killed_worker_is_retried_once_then_fails_and_the_pool_recovers(server, http):
     job = submit(http, MEDIUM)
     _wait_running(http, job["id"])
@@ -128,6 +131,7 @@ def test_a_killed_worker_is_retried_once_then_fails_and_the_pool_recovers(server
     assert wait_for(http, after["id"], timeout=120)["status"] == "succeeded"
 
 
+@pytest.mark.slow_cases("0.9", "1.2")
 @pytest.mark.parametrize("delay", [0.0, 0.3, 0.6, 0.9, 1.2])
 def test_cancel_racing_completion_leaves_one_final_state(http, delay):
     job = submit(http, {"scenario": scenario(n=300, steps=60, every=0)})

@@ -65,6 +65,7 @@ def _burst(url: str, n: int) -> list[tuple[int, float, str | None]]:
     return out
 
 
+@pytest.mark.slow
 def test_a_full_queue_refuses_a_burst_at_once_with_a_measured_retry_after(make_server):
     s = make_server({"FLOCKLAB_MAX_QUEUED": "3"})
     with httpx.Client(base_url=s.url, timeout=30) as http:

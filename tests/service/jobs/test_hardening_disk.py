@@ -35,6 +35,7 @@ def _wait_for_partial(data: Path, timeout: float = 30) -> None:
         time.sleep(0.05)
 
 
+@pytest.mark.slow
 def test_a_killed_worker_leaves_no_partial_output(make_app, tmp_path):
     data = tmp_path / "data"
     s = make_app({"FLOCKLAB_MAX_ATTEMPTS": "1"}, data_dir=data)
@@ -49,6 +50,7 @@ def test_a_killed_worker_leaves_no_partial_output(make_app, tmp_path):
     assert _attempt_leftovers(data) == []
 
 
+@pytest.mark.slow
 def test_sigterm_leaves_no_partial_output(make_server, tmp_path):
     data = tmp_path / "data"
     s = make_server(data_dir=data)
@@ -91,6 +93,7 @@ def _fill(disk: Path, leave: int) -> Path:
 
 
 # small_disk before make_app: the services stop before the disk is unmounted.
+@pytest.mark.slow
 def test_a_full_disk_is_503_on_submit_and_a_clear_job_error(small_disk, make_app, tmp_path):
     if small_disk is None:
         # No mount here: a reserve larger than the disk's free space trips the same check.

@@ -66,6 +66,7 @@ def test_range_requests(http, finished):
     assert r.headers["Content-Range"] == f"bytes */{size}"
 
 
+@pytest.mark.slow
 def test_sigterm_answers_long_polls_and_ends_streams_at_once(make_server):
     s = make_server()
     with httpx.Client(base_url=s.url, timeout=60) as http:

@@ -20,6 +20,7 @@ def medium_scenario() -> dict:
     return scenario(n=1000, steps=1000, every=0)
 
 
+@pytest.mark.slow
 def test_wait_answers_when_the_job_has_finished(http: httpx.Client):
     job = submit(http, {"scenario": medium_scenario()})
     t0 = time.monotonic()
@@ -34,6 +35,7 @@ def test_wait_answers_when_the_job_has_finished(http: httpx.Client):
     assert time.monotonic() - t1 < 5
 
 
+@pytest.mark.slow
 def test_wait_until_change_answers_at_the_first_change(http: httpx.Client):
     job = submit(http, {"scenario": long_scenario()})
     try:
@@ -69,6 +71,7 @@ def test_cancelling_any_finished_job_is_409(http: httpx.Client):
     assert http.get(f"/v1/jobs/{job['id']}").json()["status"] == "cancelled"
 
 
+@pytest.mark.slow
 def test_client_events_limit_and_the_job_log(server, caplog):
     caplog.set_level(logging.INFO, logger="flocklab.jobs")
     with clients.Client(server.url, transport=server.transport) as c:

@@ -181,6 +181,7 @@ def test_finished_jobs_cannot_be_cancelled(http, finished):
     assert http.get(f"/v1/jobs/{finished['id']}").json()["status"] == "succeeded"
 
 
+@pytest.mark.slow
 def test_timeout_ends_as_timed_out(http):
     job = submit(http, {"scenario": long_scenario(), "timeout_seconds": 1.5})
     done = wait_for(http, job["id"], timeout=30)
@@ -189,6 +190,7 @@ def test_timeout_ends_as_timed_out(http):
     assert done["finished_at"] is not None
 
 
+@pytest.mark.slow
 def test_a_diverging_run_fails_with_its_step_and_cause_and_keeps_its_frames(http):
     # Two agents at the same point: the pair force is infinite at the first step. (A
     # runaway speed such as v0 = 1e300 is now refused at admission: test_hardening_input.)

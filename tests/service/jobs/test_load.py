@@ -6,6 +6,8 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import pytest
+
 from flocklab import clients
 from tests.service.svc_helpers import scenario
 
@@ -24,6 +26,7 @@ def _worker(server) -> int:
     return pids[0]
 
 
+@pytest.mark.slow
 def test_fifty_concurrent_submissions_none_lost_and_worker_memory_flat(server):
     sizes = [50, 200, 500, 1000]
     with clients.Client(server.url, transport=server.transport) as c:

@@ -27,6 +27,7 @@ def tight(tmp_path_factory):
     s.stop()
 
 
+@pytest.mark.slow
 def test_a_full_queue_answers_429_with_retry_after(tight):
     with tight.client(timeout=30) as http:
         running = submit(http, {"scenario": long_scenario()})
@@ -48,6 +49,7 @@ def _worker(server) -> int:
     return pids[0]
 
 
+@pytest.mark.slow_cases("timeout")
 @pytest.mark.parametrize("stop", ["cancel", "timeout"])
 def test_a_hung_worker_is_killed_after_the_grace_period(tight, stop):
     """SIGSTOP the worker mid-job so it cannot stop by itself: the supervisor must kill it
@@ -76,6 +78,7 @@ def test_a_hung_worker_is_killed_after_the_grace_period(tight, stop):
         assert _worker(tight) != hung
 
 
+@pytest.mark.slow
 def test_results_expire_after_the_ttl_with_410(tight):
     with tight.client(timeout=30) as http:
         job = submit(http, {"scenario": scenario()})

@@ -34,6 +34,7 @@ def test_the_preset_validates_and_is_sized_for_minutes():
     assert {r.scenario.n_agents / r.scenario.space.L ** 2 for r in runs} == {2.0}
 
 
+@pytest.mark.slow
 def test_shrunken_fss_preset_table_and_picture(tmp_path, taichi_cpu):
     doc = SWEEP_PRESETS["vicsek-fss"].build()
     doc["axes"][0]["values"] = [2.8, 4.0]

@@ -30,6 +30,7 @@ def brute_force_edges(pos: np.ndarray, r: float, box: float | None, inclusive: b
     return int(np.triu(close, 1).sum())
 
 
+@pytest.mark.slow_cases("vicsek", "flocking_fixed")
 @pytest.mark.parametrize("family", list(FAMILIES))
 def test_snapshot_of_every_family(runs, tmp_path, family):
     run = RunData(runs[family])
@@ -133,6 +134,7 @@ def test_vector_formats_by_suffix(runs, tmp_path, suffix, magic):
     assert out.read_bytes().startswith(magic)
 
 
+@pytest.mark.slow
 def test_large_n_draws_a_field_quickly(large_run, tmp_path):
     run = RunData(large_run)
     for field in ("density", "polarization"):
@@ -213,6 +215,7 @@ def test_movie_mp4_and_gif(runs, tmp_path):
     assert gif.shape[0] == len(range(0, run.n_frames, 5)) and gif.shape[1:3] == (200, 200)
 
 
+@pytest.mark.slow
 def test_cli_render_and_its_errors(runs, tmp_path):
     folder = runs["vicsek"]
     out = tmp_path / "v.png"

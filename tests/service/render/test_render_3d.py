@@ -47,6 +47,7 @@ def dots(fig) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(scatter.get_offsets()), scatter.get_facecolors()
 
 
+@pytest.mark.slow_cases("vicsek", "flocking_fixed")
 @pytest.mark.parametrize("family", FAMILIES)
 def test_snapshot_of_every_family_in_3d(runs_3d, tmp_path, family):
     run = RunData(runs_3d[family])
@@ -137,6 +138,7 @@ def large_run_3d(tmp_path_factory, taichi_cpu):
     return run_to(tmp_path_factory.mktemp("render-large-3d") / "vicsek-3d", sc)
 
 
+@pytest.mark.slow
 def test_large_3d_run_draws_a_field(large_run_3d, tmp_path):
     run = RunData(large_run_3d)
     for field in ("auto", "polarization"):
@@ -170,6 +172,7 @@ def test_3d_movie_mp4_and_gif(runs_3d, tmp_path):
     assert gif.shape[0] == len(range(0, run.n_frames, 4)) and gif.shape[1:3] == (200, 200)
 
 
+@pytest.mark.slow
 def test_cli_renders_a_3d_run(runs_3d, tmp_path):
     folder = runs_3d["vicsek"]
     out = tmp_path / "v.png"

@@ -29,6 +29,7 @@ def _cached(server, job_id: str) -> dict[str, int]:
     return {p.name: p.stat().st_size for p in folder.glob("*") if not p.name.startswith(".")}
 
 
+@pytest.mark.slow
 def test_the_cache_stays_within_its_bound_least_recently_used_first(make_server):
     s = make_server({"FLOCKLAB_RENDER_CACHE_BYTES": str(CACHE_BYTES)})
     with httpx.Client(base_url=s.url, timeout=120) as http:
@@ -51,6 +52,7 @@ def test_the_cache_stays_within_its_bound_least_recently_used_first(make_server)
         assert len(_cached(s, job)) < len(sizes) + 1
 
 
+@pytest.mark.slow
 def test_no_new_pictures_below_the_disk_reserve(make_server, tmp_path):
     data = tmp_path / "reserve"
     s = make_server(data_dir=data)

@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from tests.service.render.conftest import read_image
 
@@ -32,6 +33,7 @@ def _draw(folder, out, first: str) -> str:
     return report["agl"]
 
 
+@pytest.mark.slow
 def test_quick_import_draws_the_same_pixels(runs, tmp_path):
     quick, usual = tmp_path / "quick.png", tmp_path / "usual.png"
     assert _draw(runs["vicsek"], quick, "") == "_Deferred"  # the glyph list never used

@@ -33,6 +33,7 @@ def done_job(server) -> str:
     return job["id"]
 
 
+@pytest.mark.slow
 def test_snapshot_is_drawn_once_then_served_from_the_results(server, http, done_job):
     path = f"/v1/jobs/{done_job}/render/snapshot.png"
     r = http.get(path, params={"width": 320, "height": 240, "frame": 3}, timeout=120)
@@ -49,6 +50,7 @@ def test_snapshot_is_drawn_once_then_served_from_the_results(server, http, done_
     assert _image(other.content).shape[:2] == (200, 200)
 
 
+@pytest.mark.slow
 def test_observables_and_movie(http, done_job):
     r = http.get(f"/v1/jobs/{done_job}/render/observables.png",
                  params={"names": "polarization,components", "width": 500, "height": 400},
@@ -71,6 +73,7 @@ def done_job_3d(server) -> str:
     return job["id"]
 
 
+@pytest.mark.slow
 def test_a_3d_job_is_drawn(server, http, done_job_3d):
     """A 3D job's snapshot (every agent through the 3D camera), movie and the client's
     job.snapshot(), as for a 2D job."""
@@ -90,6 +93,7 @@ def test_a_3d_job_is_drawn(server, http, done_job_3d):
         assert _image(content).shape[:2] == (200, 200)
 
 
+@pytest.mark.slow
 def test_render_errors_are_problems(http, done_job, server):
     base = f"/v1/jobs/{done_job}/render"
     body = assert_problem(http.get(f"{base}/snapshot.png", params={"frame": 999},
@@ -138,6 +142,7 @@ def test_results_deleted_while_drawing_answer_410(server, http):
     assert_problem(answer[0], 410)
 
 
+@pytest.mark.slow
 def test_client_snapshot(server, done_job, tmp_path):
     with clients.Client(server.url, transport=server.transport) as c:
         job = c.job(done_job)
@@ -150,6 +155,7 @@ def test_client_snapshot(server, done_job, tmp_path):
         assert exc.value.errors[0]["loc"] == "query.frame"
 
 
+@pytest.mark.slow
 def test_render_routes_need_the_api_key(make_app):
     s = make_app({"FLOCKLAB_API_KEY": "s3cret"})
     key = {"X-API-Key": "s3cret"}

@@ -45,6 +45,7 @@ def _table(http: httpx.Client, sweep_id: str, name: str) -> dict[str, Any]:
     return r.json()
 
 
+@pytest.mark.slow
 def test_a_replicas_axis_runs(http: httpx.Client):
     """A `replicas` axis was accepted (202), then the worker refused its own stored form
     ("give 'replicas' either as a field or as an axis") and the sweep always failed."""
@@ -65,6 +66,7 @@ def test_a_replicas_axis_runs(http: httpx.Client):
     assert Sweep.model_validate_json(stored).n_runs == 6  # the stored form validates
 
 
+@pytest.mark.slow
 def test_b_no_server_path_in_the_sweep_plots_problem(http: httpx.Client,
                                                      hostile_server: InProcessServer):
     """Plotting a sweep without axes answered 422 "<the results folder>: the sweep has no
@@ -82,6 +84,7 @@ def test_b_no_server_path_in_the_sweep_plots_problem(http: httpx.Client,
         assert root not in r.text
 
 
+@pytest.mark.slow
 def test_c_render_parameters_and_empty_observables_are_4xx(http: httpx.Client,
                                                            tmp_path: Path):
     """movie.mp4?fps=1e-300 reached the encoder as "-r 0" (a 500); observables.png of a
@@ -211,6 +214,7 @@ def _assert_runs_kept(http: httpx.Client, server: InProcessServer, done: dict[st
     assert sum(row[count] for row in table["data"]) == len(completed)
 
 
+@pytest.mark.slow
 def test_k_a_second_worker_loss_keeps_the_finished_runs(long_server: InProcessServer):
     """Losing the worker on the last allowed attempt failed the sweep and deleted every
     run it had finished."""
@@ -228,6 +232,7 @@ def test_k_a_second_worker_loss_keeps_the_finished_runs(long_server: InProcessSe
         _assert_runs_kept(http, long_server, done)
 
 
+@pytest.mark.slow
 def test_k_a_cancel_then_a_worker_death_keeps_the_finished_runs(long_server: InProcessServer):
     """A cancel followed by the worker's death (before it wrote its tables) deleted the
     runs the sweep had finished."""
@@ -249,6 +254,7 @@ def _peak_rss_mib(pid: int) -> float:
     raise AssertionError("no VmHWM")
 
 
+@pytest.mark.slow
 def test_g_admitting_a_max_size_sweep_takes_bounded_memory(make_server):
     """Checking a 10^5-run sweep held every expanded run (a validated scenario each):
     bench/sweep_admission_memory.py measured +149 MiB of peak RSS for it before the runs

@@ -7,6 +7,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from flocklab.schemas.sweep import load_sweep
 from flocklab.service.cli import main
 
@@ -32,6 +34,7 @@ def write(tmp_path, name, doc):
     return str(path)
 
 
+@pytest.mark.slow
 def test_sweep_runs_resumes_and_refuses_another_sweep_in_its_folder(tmp_path):
     path, out = write(tmp_path, "s.json", SWEEP), str(tmp_path / "out")
     proc = flocklab("sweep", path, "--out", out)
@@ -137,6 +140,7 @@ def test_catalogs_list_the_sweep_schema_and_the_sweep_presets(capsys):
     assert load_sweep(json.loads(capsys.readouterr().out)).n_runs == 40
 
 
+@pytest.mark.slow
 def test_ctrl_c_keeps_finished_runs_and_a_rerun_resumes(tmp_path):
     # One run per engine call (the engine would fuse the four runs into one launch that
     # ends them together), each long enough (about a second) for the interrupt to land.

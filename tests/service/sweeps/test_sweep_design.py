@@ -58,6 +58,7 @@ def test_sobol_indices_of_an_additive_function():
     assert exact.round(3).tolist() == [0.467, 0.467, 0.066]  # V = (16, 16, 2.25) / 12
 
 
+@pytest.mark.slow
 def test_sobol_indices_of_the_ishigami_function():
     """Ishigami & Homma (1990), a = 7, b = 0.1 on [-pi, pi]^3: S1 = (0.3139, 0.4424, 0),
     ST = (0.5576, 0.4424, 0.2437) — x3 acts only through its interaction with x1."""

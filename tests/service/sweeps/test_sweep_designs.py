@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import httpx
+import pytest
 
 from tests.service.svc_helpers import assert_problem
 from tests.service.sweeps.test_sweeps import http, submit, sweep_server, sweep_spec, wait_sweep  # noqa: F401
@@ -23,6 +24,7 @@ def design_spec() -> dict:
     return spec
 
 
+@pytest.mark.slow
 def test_sensitivity_table_over_http(http: httpx.Client, tmp_path: Path):  # noqa: F811
     from flocklab.schemas.sweep import Sweep
     from flocklab.service.sweeps.runner import run_sweep

@@ -28,6 +28,7 @@ def _alive() -> tuple[int, int]:
             sum(1 for o in objs if type(o) is dict and o.keys() == RECORD_KEYS))
 
 
+@pytest.mark.slow
 def test_the_runner_holds_neither_every_run_nor_every_record(tmp_path: Path, taichi_cpu):
     """300 runs: while they run, at most one engine batch of runs is alive (main: all
     300, from expand()) and no finished run's record beyond the one being written (main:

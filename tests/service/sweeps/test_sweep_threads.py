@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 
 from tests.service.svc_helpers import scenario, submit, wait_for
 from tests.service.sweeps.test_sweeps import SWEEP_ENV, _worker_pids, sweep_spec, wait_sweep
@@ -21,6 +22,7 @@ def _threads(pid: int) -> int:
     return len(os.listdir(f"/proc/{pid}/task"))
 
 
+@pytest.mark.slow
 def test_a_sweep_runs_within_the_workers_threads(make_server):
     # The worker is allotted 1 CPU thread (THREADS_PER_WORKER in the test settings).
     s = make_server({**SWEEP_ENV, "FLOCKLAB_SWEEP_BATCH_RUNS": "2"})

@@ -102,6 +102,7 @@ def wait_sweep(http: httpx.Client, sweep_id: str, until: Any = None, timeout: fl
         assert time.monotonic() < deadline, f"sweep still {s['status']} after {timeout} s"
 
 
+@pytest.mark.slow
 def test_sweep_table_equals_the_local_runners(http: httpx.Client, tmp_path: Path):
     from flocklab.schemas.sweep import Sweep
     from flocklab.service.sweeps.runner import run_sweep
@@ -168,6 +169,7 @@ def test_progress_over_sse(http: httpx.Client):
     assert done_counts == sorted(done_counts) and all(s["runs_total"] == 3 for s in states)
 
 
+@pytest.mark.slow
 def test_cancel_keeps_the_finished_runs(long_http: httpx.Client):
     http = long_http
     # 12 runs of 1.5e6 agent-steps (0.1-0.3 s each): long enough to cancel in the middle.
@@ -290,6 +292,7 @@ def _worker_pids(server: InProcessServer | ServerProcess) -> list[int]:
     return pids
 
 
+@pytest.mark.slow
 def test_worker_killed_mid_sweep_resumes_without_redoing_runs(
         long_http: httpx.Client, long_server: InProcessServer):
     http = long_http
@@ -328,6 +331,7 @@ def test_openapi_describes_the_sweep_body(http: httpx.Client):
     assert "/v1/sweeps/{sweep_id}/table" in doc["paths"]
 
 
+@pytest.mark.slow
 def test_service_killed_mid_sweep_resumes_after_restart(make_server, tmp_path: Path):
     data = tmp_path / "data"
     # Runs of about half a second each, so the API is killed well before the sweep ends

@@ -113,6 +113,7 @@ def _rows(path):
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow
 def test_binder_cumulant_of_random_headings(tmp_path, taichi_cpu):
     """eta = 2 pi: each new heading is the neighbours' mean plus noise uniform in
     [-pi, pi], so the headings are iid uniform every step (and at step 0), the series of
