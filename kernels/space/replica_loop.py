@@ -25,11 +25,36 @@ from flocklab.schemas import Scenario
 
 from .. import runtime
 from ..replicas import FusedBatch, host_array
+from .frame import point_mass_frame
 from .params import Slots
 
 # Each replica's integer slots: its last step, its observation interval, the step it
 # diverged at (-1: none) and the observation rows written.
 IP = Slots("STEPS", "EVERY", "BAD", "NOBS")
+
+
+def offsets(counts: Any) -> np.ndarray:
+    """[0, c_0, c_0 + c_1, ...] (int32): where each replica's rows of an array start."""
+    return np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+
+
+def observation_rows(scenarios: list[Scenario]) -> list[int]:
+    """Each replica's budget of observation rows: one per observation step, the last
+    step's included, and one to spare."""
+    return [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
+
+
+def cell_offsets(ns: list[int], per_agent: int) -> np.ndarray:
+    """Where each replica's cells start in a per-replica cell list (replica_cells.py) of
+    per_agent * n + 16 cells (the cell budget) and the one past its last."""
+    return offsets([per_agent * n + 17 for n in ns])
+
+
+def vector_rows(dim: int) -> Any:
+    """The kernel argument type of a state's (N, dim) array as N dim-vectors: one load per
+    row (kernels/space/grid.py `row`), 10% of the step at N = 100 next to a load per
+    component."""
+    return ti.types.ndarray(dtype=ti.types.vector(dim, float), ndim=1)
 
 
 def make_replica(observe: Callable, move: Callable, size: int) -> Callable:
@@ -61,14 +86,16 @@ def make_replica(observe: Callable, move: Callable, size: int) -> Callable:
 class LoopBatch(FusedBatch):
     """A batch of replicas advanced by `make_replica`'s loop: `kernel(s0, s1, *arrays)`
     with the arrays of `args` in the order ARRAYS, observation rows of the columns OBS
-    (column 0: the step) in `args["obs"]`, and DIVERGED (what went non-finite, and why)
-    for a divergence."""
+    (column 0: the step) in `args["obs"]`, DIVERGED (what went non-finite, and why) for
+    a divergence and CONVERGENCE, the observables a convergence test reads."""
 
     dimensions = (2, 3)
     CHECKPOINTS = True  # the whole state is in `args`
     ARRAYS: tuple[str, ...] = ()
     OBS: tuple[str, ...] = ()
     DIVERGED: tuple[str, str] = ("", "")
+    CONVERGENCE: tuple[str, ...] = ()  # the observables a convergence test reads
+    dim: int
     kernel: Callable[..., None]
 
     def lay_out(self, scenarios: list[Scenario]) -> np.ndarray:
@@ -76,15 +103,26 @@ class LoopBatch(FusedBatch):
         observation rows (ooff: one per observation step, the last step's included);
         return the replicas' slots (IP), their steps and intervals filled in."""
         self.scenarios = scenarios
-        ns = [s.n_agents for s in scenarios]
-        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
-        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
-        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        self.aoff = offsets([s.n_agents for s in scenarios])
+        self.ooff = offsets(observation_rows(scenarios))
         iprm = np.zeros((len(scenarios), IP.size), dtype=np.int32)
         for b, sc in enumerate(scenarios):
             iprm[b, [IP.STEPS, IP.EVERY, IP.BAD]] = [
                 sc.time.steps, sc.recording.observables_every, -1]
         return iprm
+
+    def initial_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every replica's initial positions and velocities (initial.py), rows
+        aoff[b] .. aoff[b + 1] replica b's."""
+        from .initial import initial_state
+
+        total = int(self.aoff[-1])
+        pos, vel = np.zeros((total, self.dim)), np.zeros((total, self.dim))
+        for b, sc in enumerate(self.scenarios):
+            init = initial_state(sc)
+            pos[self.aoff[b]:self.aoff[b + 1]] = init.positions
+            vel[self.aoff[b]:self.aoff[b + 1]] = init.velocities
+        return pos, vel
 
     @staticmethod
     def arr(a: np.ndarray, dtype: Any = float) -> np.ndarray:
@@ -96,6 +134,15 @@ class LoopBatch(FusedBatch):
         """Advance every replica from step s0 towards s1 (each stops at its own end)."""
         self.invalidate()
         self.kernel(s0, s1, *(self.args[k] for k in self.ARRAYS))
+
+    def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
+        """A point mass's frame (frame.py) of the state `pos`, `vel` of `args`."""
+        a0, a1 = self.aoff[b], self.aoff[b + 1]
+        return point_mass_frame(lambda: self.host("pos")[a0:a1],
+                                lambda: self.host("vel")[a0:a1], arrays, self.dim)
+
+    def convergence_keys(self) -> list[str]:
+        return list(self.CONVERGENCE)
 
     def rows(self, b: int, iprm: np.ndarray) -> np.ndarray:
         """Replica b's observation rows so far (float64)."""

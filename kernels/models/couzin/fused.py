@@ -28,8 +28,9 @@ from flocklab.schemas import Scenario
 
 from ...space import rng
 from ...space.cells import SPREAD
+from ...space.frame import point_mass_frame
 from ...space.integrate import nonfinite
-from ...space.replica_loop import LoopBatch, make_replica
+from ...space.replica_loop import LoopBatch, make_replica, vector_rows
 from . import law
 from .start import directions
 
@@ -42,6 +43,7 @@ ARRAYS = ("aoff", "ooff", "prm", "iprm", "kseed", "pos", "ew", "pos2", "ew2", "o
 @cache
 def advance_kernel(dim: int):
     """The batch's kernel for one dimension."""
+    vnd = vector_rows(dim)
 
     @ti.func
     def observe(b, s, r, a0, n, q, A: ti.template()):
@@ -90,8 +92,6 @@ def advance_kernel(dim: int):
         return bad
 
     replica = make_replica(observe, move, law.P.size)
-
-    vnd = ti.types.ndarray(dtype=ti.types.vector(dim, float), ndim=1)
 
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, aoff: nd, ooff: nd, prm: nd, iprm: nd, kseed: nd,
@@ -146,19 +146,9 @@ class CouzinBatch(LoopBatch):
 
     def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
         a0, a1 = self.aoff[b], self.aoff[b + 1]
-        out = {}
-        if "position" in arrays:
-            out["position"] = self.host("pos")[a0:a1]
-        if "velocity" in arrays or "heading" in arrays:
-            ew = self.host("ew")[a0:a1]
-            if "velocity" in arrays:
-                out["velocity"] = self.speed[a0:a1, None] * ew
-            if "heading" in arrays:
-                out["heading"] = ew if self.dim == 3 else np.arctan2(ew[:, 1], ew[:, 0])
-        return out
-
-    def convergence_keys(self) -> list[str]:
-        return []
+        return point_mass_frame(lambda: self.host("pos")[a0:a1],
+                                lambda: self.speed[a0:a1, None] * self.host("ew")[a0:a1],
+                                arrays, self.dim, direction=lambda: self.host("ew")[a0:a1])
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:

@@ -28,9 +28,8 @@ import taichi as ti
 from flocklab.schemas import Scenario
 
 from ...space.cells import SPREAD
-from ...space.frame import point_mass_frame
-from ...space.integrate import STAGES, finish_pair, nonfinite, stage_pair
-from ...space.replica_loop import LoopBatch, make_replica
+from ...space.integrate import STAGES, finish_pair, put_pair, stage_pair
+from ...space.replica_loop import LoopBatch, make_replica, vector_rows
 from . import law
 
 nd = ti.types.ndarray()
@@ -45,6 +44,7 @@ ARRAYS = ("aoff", "ooff", "prm", "iprm", "pos", "vel", "acc", "xs", "vs", "xk", 
 def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
     """The batch's kernel for one dimension, normalisation kind, integrator and whether
     the replicas have a cutoff."""
+    vnd = vector_rows(dim)
 
     @ti.func
     def accel(a0, n, q, xsrc: ti.template(), vsrc: ti.template(), out: ti.template(),
@@ -124,22 +124,14 @@ def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
             h6 = h / 6
             for i in range(a0, a0 + n):
                 x, v = finish_pair(pos[i], vel[i], vs[i], acc[i], xk[i], vk[i], h6)
-                pos[i] = x
-                vel[i] = v
-                bad |= nonfinite(x, v)
+                bad |= put_pair(pos, vel, i, x, v)
         else:
             for i in range(a0, a0 + n):
                 x, v = law.euler(pos[i], vel[i], acc[i], h)
-                pos[i] = x
-                vel[i] = v
-                bad |= nonfinite(x, v)
+                bad |= put_pair(pos, vel, i, x, v)
         return bad
 
     replica = make_replica(observe, move, law.P.size)
-
-    # The state's (N, dim) arrays as N dim-vectors: one load per row (kernels/space/grid.py
-    # `row`), 10% of the step at N = 100 next to a load per component.
-    vnd = ti.types.ndarray(dtype=ti.types.vector(dim, float), ndim=1)
 
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, aoff: nd, ooff: nd, prm: nd, iprm: nd, pos: vnd,
@@ -158,24 +150,20 @@ class CuckerSmaleBatch(LoopBatch):
 
     ARRAYS, OBS = ARRAYS, OBS
     DIVERGED = ("position/velocity", law.DIVERGED_CAUSE)
+    CONVERGENCE = ("velocity_diameter",)
 
     def __init__(self, scenarios: list[Scenario]):
-        from ...space.initial import initial_state
-
         first = scenarios[0]
         self.dim = dim = first.dimension
         rk4 = first.model.integrator == "rk4"
         self.kernel = advance_kernel(dim, first.model.normalization == "local", rk4,
                                      first.model.cutoff is not None)
         iprm = self.lay_out(scenarios)
+        pos, vel = self.initial_rows()
         total = int(self.aoff[-1])
         prm = np.zeros((len(scenarios), law.P.size))
-        pos, vel = np.zeros((total, dim)), np.zeros((total, dim))
         for b, sc in enumerate(scenarios):
             prm[b] = law.parameters(sc.model, sc.n_agents, sc.time.dt)
-            init = initial_state(sc)
-            a0, a1 = self.aoff[b], self.aoff[b + 1]
-            pos[a0:a1], vel[a0:a1] = init.positions, init.velocities
 
         arr = self.arr
         stage = (total, dim) if rk4 else (1, dim)
@@ -194,14 +182,6 @@ class CuckerSmaleBatch(LoopBatch):
         wants = self.scenarios[b].recording.wants
         keep = [c for c in OBS[1:] if wants(c) and not (c.endswith("_z") and self.dim == 2)]
         return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
-
-    def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
-        a0, a1 = self.aoff[b], self.aoff[b + 1]
-        return point_mass_frame(lambda: self.host("pos")[a0:a1],
-                                lambda: self.host("vel")[a0:a1], arrays, self.dim)
-
-    def convergence_keys(self) -> list[str]:
-        return ["velocity_diameter"]
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:

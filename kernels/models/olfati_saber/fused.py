@@ -30,9 +30,8 @@ from flocklab.schemas import Scenario
 
 from ...space.cells import SPREAD
 from ...space.graph import find_serial, union_serial
-from ...space.initial import unit_rows
-from ...space.integrate import nonfinite
-from ...space.replica_loop import LoopBatch, make_replica
+from ...space.integrate import put_pair
+from ...space.replica_loop import LoopBatch, make_replica, offsets, vector_rows
 from . import law
 from .observe import deviation_energy, relative_connectivity
 
@@ -48,6 +47,7 @@ ARRAYS = ("aoff", "ooff", "koff", "prm", "iprm", "pos", "vel", "acc", "obs", "pa
 @cache
 def advance_kernel(dim: int, alg: int):
     """The batch's kernel for one dimension and algorithm."""
+    vnd = vector_rows(dim)
 
     @ti.func
     def observe(b, s, r, a0, n, q, A: ti.template()):
@@ -119,14 +119,10 @@ def advance_kernel(dim: int, alg: int):
             u = law.acceleration(acc[i], pos[i], vel[i], t, q, obst, koff[b], koff[b + 1],
                                  alg)
             x, v = law.euler(pos[i], vel[i], u, h)
-            pos[i] = x
-            vel[i] = v
-            bad |= nonfinite(x, v)
+            bad |= put_pair(pos, vel, i, x, v)
         return bad
 
     replica = make_replica(observe, move, law.P.size)
-
-    vnd = ti.types.ndarray(dtype=ti.types.vector(dim, float), ndim=1)
 
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, aoff: nd, ooff: nd, koff: nd, prm: nd, iprm: nd,
@@ -145,27 +141,22 @@ class OlfatiSaberBatch(LoopBatch):
 
     ARRAYS, OBS = ARRAYS, OBS
     DIVERGED = ("position/velocity", law.DIVERGED_CAUSE)
+    CONVERGENCE = ("velocity_mismatch",)
 
     def __init__(self, scenarios: list[Scenario]):
-        from ...space.initial import initial_state
-
-        first = scenarios[0]
-        self.dim = dim = first.dimension
-        self.kernel = advance_kernel(dim, first.model.algorithm)
+        self.dim = dim = scenarios[0].dimension
+        self.kernel = advance_kernel(dim, scenarios[0].model.algorithm)
         iprm = self.lay_out(scenarios)
+        pos, vel = self.initial_rows()
         ks = [len(s.model.obstacles) for s in scenarios]
-        koff = np.concatenate([[0], np.cumsum(ks)]).astype(np.int32)
+        koff = offsets(ks)
         obst = np.zeros((max(1, int(koff[-1])), law.OBST_WIDTH))
         total = int(self.aoff[-1])
         prm = np.zeros((len(scenarios), law.P.size))
-        pos, vel = np.zeros((total, dim)), np.zeros((total, dim))
         for b, sc in enumerate(scenarios):
             prm[b] = law.parameters(sc.model, sc.time.dt)
             if ks[b]:
                 obst[koff[b]:koff[b + 1]] = law.obstacle_rows(sc.model)
-            init = initial_state(sc)
-            a0, a1 = self.aoff[b], self.aoff[b + 1]
-            pos[a0:a1], vel[a0:a1] = init.positions, init.velocities
 
         arr = self.arr
         self.args = dict(
@@ -197,23 +188,6 @@ class OlfatiSaberBatch(LoopBatch):
         wants = sc.recording.wants
         return {"step": rows[:, 0],
                 **{c: cols[c] for c in OBS if c not in skip and wants(c)}}
-
-    def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
-        a0, a1 = self.aoff[b], self.aoff[b + 1]
-        out = {}
-        if "position" in arrays:
-            out["position"] = self.host("pos")[a0:a1]
-        if "velocity" in arrays or "heading" in arrays:
-            vel = self.host("vel")[a0:a1]
-            if "velocity" in arrays:
-                out["velocity"] = vel
-            if "heading" in arrays:
-                out["heading"] = (unit_rows(vel) if self.dim == 3
-                                  else np.arctan2(vel[:, 1], vel[:, 0]))
-        return out
-
-    def convergence_keys(self) -> list[str]:
-        return ["velocity_mismatch"]
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:
