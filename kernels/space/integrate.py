@@ -146,6 +146,14 @@ def nonfinite(x, v):
     return ti.cast(ti.math.isnan(s) or ti.math.isinf(s), ti.i32)
 
 
+@ti.func
+def put_pair(pos: ti.template(), vel: ti.template(), i, x, v):
+    """Row i of the state (pos, vel) set to (x, v); `nonfinite(x, v)`."""
+    pos[i] = x
+    vel[i] = v
+    return nonfinite(x, v)
+
+
 @ti.kernel
 def count_nonfinite(a: nd, bad: nd):
     """bad[0] += the rows of `a` holding a NaN or an infinity."""

@@ -20,25 +20,22 @@ per-step schedule's launches).
 """
 
 from functools import cache
-from typing import Any
 
 import numpy as np
 import taichi as ti
 
 from flocklab.schemas import Scenario
 
-from ... import runtime
-from ...replicas import FusedBatch, host_array
 from ...space import rng
 from ...space.cells import SPREAD
+from ...space.frame import point_mass_frame
 from ...space.integrate import nonfinite
-from ...space.params import Slots
+from ...space.replica_loop import LoopBatch, make_replica, vector_rows
 from . import law
 from .start import directions
 
 nd = ti.types.ndarray()
 FUSED_MAX_N = 512
-IP = Slots("STEPS", "EVERY", "BAD", "NOBS")
 OBS = ("step", "polarization", "milling")
 ARRAYS = ("aoff", "ooff", "prm", "iprm", "kseed", "pos", "ew", "pos2", "ew2", "obs")
 
@@ -46,13 +43,12 @@ ARRAYS = ("aoff", "ooff", "prm", "iprm", "kseed", "pos", "ew", "pos2", "ew2", "o
 @cache
 def advance_kernel(dim: int):
     """The batch's kernel for one dimension."""
+    vnd = vector_rows(dim)
 
     @ti.func
-    def observe(b, s, a0, n, A: ti.template()):
-        """One row of observables of replica b's state at step s (observe.py's)."""
-        ooff, iprm, pos, ew, obs = ti.static(A[1], A[3], A[5], A[6], A[9])
-        r = ooff[b] + iprm[b, IP.NOBS]
-        iprm[b, IP.NOBS] += 1
+    def observe(b, s, r, a0, n, q, A: ti.template()):
+        """Row r of observables: replica b's state at step s (observe.py's)."""
+        pos, ew, obs = ti.static(A[5], A[6], A[9])
         c = ti.Vector.zero(float, dim)
         p = ti.Vector.zero(float, dim)
         for i in range(a0, a0 + n):
@@ -95,24 +91,7 @@ def advance_kernel(dim: int):
             ew[i] = ew2[i]
         return bad
 
-    @ti.func
-    def replica(b, s0, s1, A: ti.template()):
-        """Replica b from step s0 towards s1 (serially: its steps, then its agents)."""
-        aoff, prm, iprm = ti.static(A[0], A[2], A[3])
-        a0 = aoff[b]
-        n = aoff[b + 1] - a0
-        q = ti.Vector([prm[b, c] for c in ti.static(range(law.P.size))], dt=float)
-        s = s0
-        while s < s1 and s <= iprm[b, IP.STEPS] and iprm[b, IP.BAD] < 0:
-            steps = iprm[b, IP.STEPS]
-            if s % iprm[b, IP.EVERY] == 0 or s == steps:
-                observe(b, s, a0, n, A)
-            if s < steps:
-                if move(b, s, a0, n, q, A) != 0:
-                    iprm[b, IP.BAD] = s
-            s += 1
-
-    vnd = ti.types.ndarray(dtype=ti.types.vector(dim, float), ndim=1)
+    replica = make_replica(observe, move, law.P.size)
 
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, aoff: nd, ooff: nd, prm: nd, iprm: nd, kseed: nd,
@@ -120,44 +99,36 @@ def advance_kernel(dim: int):
         A = ti.static((aoff, ooff, prm, iprm, kseed, pos, ew, pos2, ew2, obs))
         for t in range((aoff.shape[0] - 1) * SPREAD):
             if t % SPREAD == 0:  # one replica per CPU task
-                replica(t // SPREAD, s0, s1, A)
+                replica(t // SPREAD, s0, s1, aoff, ooff, prm, iprm, A)
 
     return advance
 
 
-class CouzinBatch(FusedBatch):
+class CouzinBatch(LoopBatch):
     """A batch of Couzin replicas (any N up to FUSED_MAX_N, parameters, seeds and steps
     each; one dimension)."""
 
-    dimensions = (2, 3)
-    CHECKPOINTS = True  # the whole state is in `args`
+    ARRAYS, OBS = ARRAYS, OBS
+    DIVERGED = ("position/direction", law.DIVERGED_CAUSE)
 
     def __init__(self, scenarios: list[Scenario]):
-        self.scenarios = scenarios
         self.dim = dim = scenarios[0].dimension
         self.kernel = advance_kernel(dim)
-        ns = [s.n_agents for s in scenarios]
-        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
-        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
-        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        iprm = self.lay_out(scenarios)
         total = int(self.aoff[-1])
         B = len(scenarios)
         prm = np.zeros((B, law.P.size))
-        iprm = np.zeros((B, IP.size), dtype=np.int32)
         kseed = np.zeros((B, law.STREAMS), dtype=np.uint32)
         pos, ew = np.zeros((total, dim)), np.zeros((total, dim))
         for b, sc in enumerate(scenarios):
             prm[b] = law.parameters(sc.model, sc.time.dt)
-            iprm[b, [IP.STEPS, IP.EVERY, IP.BAD]] = [
-                sc.time.steps, sc.recording.observables_every, -1]
             kseed[b] = [rng.seed_key(sc.seed, c) for c in range(law.STREAMS)]
             a0, a1 = self.aoff[b], self.aoff[b + 1]
             pos[a0:a1], ew[a0:a1] = directions(sc)
-        self.speed = np.repeat([sc.model.speed for sc in scenarios], ns)
+        self.speed = np.repeat([sc.model.speed for sc in scenarios],
+                               [s.n_agents for s in scenarios])
 
-        def arr(a: np.ndarray, dtype: Any = float) -> np.ndarray:
-            return host_array(a, runtime.real() if dtype is float else dtype)
-
+        arr = self.arr
         self.args = dict(
             aoff=arr(self.aoff, np.int32), ooff=arr(self.ooff, np.int32), prm=arr(prm),
             iprm=arr(iprm, np.int32), kseed=arr(kseed, np.uint32), pos=arr(pos),
@@ -166,41 +137,18 @@ class CouzinBatch(FusedBatch):
         )
         assert tuple(self.args) == ARRAYS
 
-    def advance(self, s0: int, s1: int) -> None:
-        """Advance every replica from step s0 towards s1 (each stops at its own end)."""
-        self.invalidate()
-        self.kernel(s0, s1, *(self.args[k] for k in ARRAYS))
-
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         """The per-step path's observables, of those replica b's recording names."""
-        o0 = self.ooff[b]
-        rows = self.host("obs")[o0:o0 + iprm[b, IP.NOBS]].astype(np.float64)
+        rows = self.rows(b, iprm)
         wants = self.scenarios[b].recording.wants
         keep = [c for c in OBS[1:] if wants(c)]
         return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
 
     def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
         a0, a1 = self.aoff[b], self.aoff[b + 1]
-        out = {}
-        if "position" in arrays:
-            out["position"] = self.host("pos")[a0:a1]
-        if "velocity" in arrays or "heading" in arrays:
-            ew = self.host("ew")[a0:a1]
-            if "velocity" in arrays:
-                out["velocity"] = self.speed[a0:a1, None] * ew
-            if "heading" in arrays:
-                out["heading"] = ew if self.dim == 3 else np.arctan2(ew[:, 1], ew[:, 0])
-        return out
-
-    def convergence_keys(self) -> list[str]:
-        return []
-
-    def extra(self, b: int, iprm: np.ndarray) -> dict[str, Any]:
-        return {}
-
-    def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
-        step = int(iprm[b, IP.BAD])
-        return None if step < 0 else (step, "position/direction", law.DIVERGED_CAUSE)
+        return point_mass_frame(lambda: self.host("pos")[a0:a1],
+                                lambda: self.speed[a0:a1, None] * self.host("ew")[a0:a1],
+                                arrays, self.dim, direction=lambda: self.host("ew")[a0:a1])
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:

@@ -21,24 +21,19 @@ per-step schedule's launches).
 """
 
 from functools import cache
-from typing import Any
 
 import numpy as np
 import taichi as ti
 
 from flocklab.schemas import Scenario
 
-from ... import runtime
-from ...replicas import FusedBatch, host_array
 from ...space.cells import SPREAD
-from ...space.frame import point_mass_frame
-from ...space.integrate import STAGES, finish_pair, nonfinite, stage_pair
-from ...space.params import Slots
+from ...space.integrate import STAGES, finish_pair, put_pair, stage_pair
+from ...space.replica_loop import LoopBatch, make_replica, vector_rows
 from . import law
 
 nd = ti.types.ndarray()
 FUSED_MAX_N = 1024
-IP = Slots("STEPS", "EVERY", "BAD", "NOBS")
 OBS = ("step", "velocity_diameter", "position_diameter", "mean_velocity_x",
        "mean_velocity_y", "mean_velocity_z", "velocity_variance")
 ARRAYS = ("aoff", "ooff", "prm", "iprm", "pos", "vel", "acc", "xs", "vs", "xk", "vk", "obs",
@@ -49,6 +44,7 @@ ARRAYS = ("aoff", "ooff", "prm", "iprm", "pos", "vel", "acc", "xs", "vs", "xk", 
 def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
     """The batch's kernel for one dimension, normalisation kind, integrator and whether
     the replicas have a cutoff."""
+    vnd = vector_rows(dim)
 
     @ti.func
     def accel(a0, n, q, xsrc: ti.template(), vsrc: ti.template(), out: ti.template(),
@@ -81,11 +77,9 @@ def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
                                       q, local)
 
     @ti.func
-    def observe(b, s, a0, n, A: ti.template()):
-        """One row of observables of replica b's state at step s."""
-        ooff, iprm, pos, vel, obs = ti.static(A[1], A[3], A[4], A[5], A[11])
-        r = ooff[b] + iprm[b, IP.NOBS]
-        iprm[b, IP.NOBS] += 1
+    def observe(b, s, r, a0, n, q, A: ti.template()):
+        """Row r of observables: replica b's state at step s."""
+        pos, vel, obs = ti.static(A[4], A[5], A[11])
         d2 = ti.math.vec2(0.0, 0.0)
         mean = ti.Vector.zero(float, dim)
         for i in range(a0, a0 + n):
@@ -107,7 +101,7 @@ def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
         obs[r, 6] = var / n
 
     @ti.func
-    def move(a0, n, q, A: ti.template()):
+    def move(b, s, a0, n, q, A: ti.template()):
         """One step of the replica's agents; 1 if a value is not finite."""
         pos, vel, acc, xs, vs, xk, vk, den = ti.static(A[4], A[5], A[6], A[7], A[8], A[9],
                                                        A[10], A[12])
@@ -130,37 +124,14 @@ def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
             h6 = h / 6
             for i in range(a0, a0 + n):
                 x, v = finish_pair(pos[i], vel[i], vs[i], acc[i], xk[i], vk[i], h6)
-                pos[i] = x
-                vel[i] = v
-                bad |= nonfinite(x, v)
+                bad |= put_pair(pos, vel, i, x, v)
         else:
             for i in range(a0, a0 + n):
                 x, v = law.euler(pos[i], vel[i], acc[i], h)
-                pos[i] = x
-                vel[i] = v
-                bad |= nonfinite(x, v)
+                bad |= put_pair(pos, vel, i, x, v)
         return bad
 
-    @ti.func
-    def replica(b, s0, s1, A: ti.template()):
-        """Replica b from step s0 towards s1 (serially: its steps, then its agents)."""
-        aoff, prm, iprm = ti.static(A[0], A[2], A[3])
-        a0 = aoff[b]
-        n = aoff[b + 1] - a0
-        q = ti.Vector([prm[b, c] for c in ti.static(range(law.P.size))], dt=float)
-        s = s0
-        while s < s1 and s <= iprm[b, IP.STEPS] and iprm[b, IP.BAD] < 0:
-            steps = iprm[b, IP.STEPS]
-            if s % iprm[b, IP.EVERY] == 0 or s == steps:
-                observe(b, s, a0, n, A)
-            if s < steps:
-                if move(a0, n, q, A) != 0:
-                    iprm[b, IP.BAD] = s
-            s += 1
-
-    # The state's (N, dim) arrays as N dim-vectors: one load per row (kernels/space/grid.py
-    # `row`), 10% of the step at N = 100 next to a load per component.
-    vnd = ti.types.ndarray(dtype=ti.types.vector(dim, float), ndim=1)
+    replica = make_replica(observe, move, law.P.size)
 
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, aoff: nd, ooff: nd, prm: nd, iprm: nd, pos: vnd,
@@ -168,48 +139,33 @@ def advance_kernel(dim: int, local: bool, rk4: bool, cut: bool):
         A = ti.static((aoff, ooff, prm, iprm, pos, vel, acc, xs, vs, xk, vk, obs, den))
         for t in range((aoff.shape[0] - 1) * SPREAD):
             if t % SPREAD == 0:  # one replica per CPU task
-                replica(t // SPREAD, s0, s1, A)
+                replica(t // SPREAD, s0, s1, aoff, ooff, prm, iprm, A)
 
     return advance
 
 
-class CuckerSmaleBatch(FusedBatch):
+class CuckerSmaleBatch(LoopBatch):
     """A batch of Cucker–Smale replicas (any N up to FUSED_MAX_N, parameters and steps
     each; one dimension, integrator and normalisation kind)."""
 
-    dimensions = (2, 3)
-    CHECKPOINTS = True  # the whole state is in `args`
+    ARRAYS, OBS = ARRAYS, OBS
+    DIVERGED = ("position/velocity", law.DIVERGED_CAUSE)
+    CONVERGENCE = ("velocity_diameter",)
 
     def __init__(self, scenarios: list[Scenario]):
-        from ...space.initial import initial_state
-
-        self.scenarios = scenarios
         first = scenarios[0]
         self.dim = dim = first.dimension
         rk4 = first.model.integrator == "rk4"
         self.kernel = advance_kernel(dim, first.model.normalization == "local", rk4,
                                      first.model.cutoff is not None)
-        ns = [s.n_agents for s in scenarios]
-        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
-        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
-        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        iprm = self.lay_out(scenarios)
+        pos, vel = self.initial_rows()
         total = int(self.aoff[-1])
-        B = len(scenarios)
-        prm = np.zeros((B, law.P.size))
-        iprm = np.zeros((B, IP.size), dtype=np.int32)
-        pos, vel = np.zeros((total, dim)), np.zeros((total, dim))
+        prm = np.zeros((len(scenarios), law.P.size))
         for b, sc in enumerate(scenarios):
             prm[b] = law.parameters(sc.model, sc.n_agents, sc.time.dt)
-            iprm[b, [IP.STEPS, IP.EVERY, IP.BAD]] = [
-                sc.time.steps, sc.recording.observables_every, -1]
-            init = initial_state(sc)
-            a0, a1 = self.aoff[b], self.aoff[b + 1]
-            pos[a0:a1], vel[a0:a1] = init.positions, init.velocities
 
-        # numpy arrays the kernel runs on in place (FusedBatch): no from/to-numpy kernels.
-        def arr(a: np.ndarray, dtype: Any = float) -> np.ndarray:
-            return host_array(a, runtime.real() if dtype is float else dtype)
-
+        arr = self.arr
         stage = (total, dim) if rk4 else (1, dim)
         self.args = dict(
             aoff=arr(self.aoff, np.int32), ooff=arr(self.ooff, np.int32), prm=arr(prm),
@@ -220,33 +176,12 @@ class CuckerSmaleBatch(FusedBatch):
         )
         assert tuple(self.args) == ARRAYS
 
-    def advance(self, s0: int, s1: int) -> None:
-        """Advance every replica from step s0 towards s1 (each stops at its own end)."""
-        self.invalidate()
-        self.kernel(s0, s1, *(self.args[k] for k in ARRAYS))
-
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         """The per-step path's observables, of those replica b's recording names."""
-        o0 = self.ooff[b]
-        rows = self.host("obs")[o0:o0 + iprm[b, IP.NOBS]].astype(np.float64)
+        rows = self.rows(b, iprm)
         wants = self.scenarios[b].recording.wants
         keep = [c for c in OBS[1:] if wants(c) and not (c.endswith("_z") and self.dim == 2)]
         return {"step": rows[:, 0], **{c: rows[:, OBS.index(c)] for c in keep}}
-
-    def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
-        a0, a1 = self.aoff[b], self.aoff[b + 1]
-        return point_mass_frame(lambda: self.host("pos")[a0:a1],
-                                lambda: self.host("vel")[a0:a1], arrays, self.dim)
-
-    def convergence_keys(self) -> list[str]:
-        return ["velocity_diameter"]
-
-    def extra(self, b: int, iprm: np.ndarray) -> dict[str, Any]:
-        return {}
-
-    def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
-        step = int(iprm[b, IP.BAD])
-        return None if step < 0 else (step, "position/velocity", law.DIVERGED_CAUSE)
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:

@@ -63,6 +63,7 @@ from ...space.integrate import STAGES, finish_pair, nonfinite, stage_pair
 from ...space.observables import TWO_PI, make_circular_spread
 from ...space.params import Slots
 from ...space.replica_cells import G_NX, G_NY, G_NZ, G_O, G_SPAN, G_W, bucket, make_replica_cells
+from ...space.replica_loop import cell_offsets, observation_rows, offsets
 from . import law, potentials
 from . import observe as fo
 from .law import DAMPING, DIVERGED_CAUSE
@@ -998,11 +999,9 @@ class FlockingBatch(FusedBatch):
         self.kernel = advance_kernel(MODES[self.mode], dim, rk4)
         B = len(scenarios)
         ns = [s.n_agents for s in scenarios]
-        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
-        caps = [4 * n + 16 for n in ns]  # cells per replica (the cell budget) + 1
-        self.coff = np.concatenate([[0], np.cumsum(np.add(caps, 1))]).astype(np.int32)
-        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
-        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        rows = observation_rows(scenarios)
+        self.aoff, self.ooff = offsets(ns), offsets(rows)
+        self.coff = cell_offsets(ns, 4)
         total = int(self.aoff[-1])
         prm = np.zeros((B, P.size))
         iprm = np.zeros((B, IP.size), dtype=np.int32)

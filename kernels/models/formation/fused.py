@@ -58,6 +58,7 @@ from ...space.cells import SPREAD
 from ...space.grid import row as row_of
 from ...space.grid import runaway_cause, widen
 from ...space.initial import initial_state
+from ...space.replica_loop import observation_rows, offsets
 from .forces import F_KINDS, G_KINDS
 from .fused_observe import (
     COMMON,
@@ -230,9 +231,9 @@ class FormationBatch(FusedBatch):
         self.dim = dim = scenarios[0].dimension
         self.advance_k, self.velocity_k = advance_kernel(p0.integrator == "rk4", dim)
         ns = [s.n_agents for s in scenarios]
-        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
-        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
-        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        self.aoff = offsets(ns)
+        rows = observation_rows(scenarios)
+        self.ooff = offsets(rows)
         B, total = len(scenarios), int(self.aoff[-1])
         prm = np.zeros((B, P.size))
         iprm = np.zeros((B, IP.size), dtype=np.int32)

@@ -22,26 +22,21 @@ N = 1000 to the per-step schedule.
 """
 
 from functools import cache
-from typing import Any
 
 import numpy as np
 import taichi as ti
 
 from flocklab.schemas import Scenario
 
-from ... import runtime
-from ...replicas import FusedBatch, host_array
 from ...space.cells import SPREAD
 from ...space.graph import find_serial, union_serial
-from ...space.initial import unit_rows
-from ...space.integrate import nonfinite
-from ...space.params import Slots
+from ...space.integrate import put_pair
+from ...space.replica_loop import LoopBatch, make_replica, offsets, vector_rows
 from . import law
 from .observe import deviation_energy, relative_connectivity
 
 nd = ti.types.ndarray()
 FUSED_MAX_N = 512
-IP = Slots("STEPS", "EVERY", "BAD", "NOBS")
 OBS = ("step", "deviation_energy", "relative_connectivity", "velocity_mismatch",
        "cohesion_radius", "min_obstacle_distance", "leader_distance", "mean_velocity_x",
        "mean_velocity_y", "mean_velocity_z", "edges", "energy_sum", "components")
@@ -52,15 +47,13 @@ ARRAYS = ("aoff", "ooff", "koff", "prm", "iprm", "pos", "vel", "acc", "obs", "pa
 @cache
 def advance_kernel(dim: int, alg: int):
     """The batch's kernel for one dimension and algorithm."""
+    vnd = vector_rows(dim)
 
     @ti.func
-    def observe(b, s, a0, n, q, A: ti.template()):
-        """One row of observables of replica b's state at step s (the host finishes the
+    def observe(b, s, r, a0, n, q, A: ti.template()):
+        """Row r of observables: replica b's state at step s (the host finishes the
         deviation energy and the connectivity from the edge sums and components)."""
-        ooff, koff, iprm, pos, vel, obs, parent, obst = ti.static(
-            A[1], A[2], A[4], A[5], A[6], A[8], A[9], A[10])
-        r = ooff[b] + iprm[b, IP.NOBS]
-        iprm[b, IP.NOBS] += 1
+        koff, pos, vel, obs, parent, obst = ti.static(A[2], A[5], A[6], A[8], A[9], A[10])
         energy = 0.0
         edges = 0.0
         vmean = ti.Vector.zero(float, dim)
@@ -126,29 +119,10 @@ def advance_kernel(dim: int, alg: int):
             u = law.acceleration(acc[i], pos[i], vel[i], t, q, obst, koff[b], koff[b + 1],
                                  alg)
             x, v = law.euler(pos[i], vel[i], u, h)
-            pos[i] = x
-            vel[i] = v
-            bad |= nonfinite(x, v)
+            bad |= put_pair(pos, vel, i, x, v)
         return bad
 
-    @ti.func
-    def replica(b, s0, s1, A: ti.template()):
-        """Replica b from step s0 towards s1 (serially: its steps, then its agents)."""
-        aoff, prm, iprm = ti.static(A[0], A[3], A[4])
-        a0 = aoff[b]
-        n = aoff[b + 1] - a0
-        q = ti.Vector([prm[b, c] for c in ti.static(range(law.P.size))], dt=float)
-        s = s0
-        while s < s1 and s <= iprm[b, IP.STEPS] and iprm[b, IP.BAD] < 0:
-            steps = iprm[b, IP.STEPS]
-            if s % iprm[b, IP.EVERY] == 0 or s == steps:
-                observe(b, s, a0, n, q, A)
-            if s < steps:
-                if move(b, s, a0, n, q, A) != 0:
-                    iprm[b, IP.BAD] = s
-            s += 1
-
-    vnd = ti.types.ndarray(dtype=ti.types.vector(dim, float), ndim=1)
+    replica = make_replica(observe, move, law.P.size)
 
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, aoff: nd, ooff: nd, koff: nd, prm: nd, iprm: nd,
@@ -156,50 +130,35 @@ def advance_kernel(dim: int, alg: int):
         A = ti.static((aoff, ooff, koff, prm, iprm, pos, vel, acc, obs, parent, obst))
         for t in range((aoff.shape[0] - 1) * SPREAD):
             if t % SPREAD == 0:  # one replica per CPU task
-                replica(t // SPREAD, s0, s1, A)
+                replica(t // SPREAD, s0, s1, aoff, ooff, prm, iprm, A)
 
     return advance
 
 
-class OlfatiSaberBatch(FusedBatch):
+class OlfatiSaberBatch(LoopBatch):
     """A batch of Olfati-Saber replicas (any N up to FUSED_MAX_N, parameters, obstacles
     and steps each; one dimension and algorithm)."""
 
-    dimensions = (2, 3)
-    CHECKPOINTS = True  # the whole state is in `args`
+    ARRAYS, OBS = ARRAYS, OBS
+    DIVERGED = ("position/velocity", law.DIVERGED_CAUSE)
+    CONVERGENCE = ("velocity_mismatch",)
 
     def __init__(self, scenarios: list[Scenario]):
-        from ...space.initial import initial_state
-
-        self.scenarios = scenarios
-        first = scenarios[0]
-        self.dim = dim = first.dimension
-        self.kernel = advance_kernel(dim, first.model.algorithm)
-        ns = [s.n_agents for s in scenarios]
-        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
-        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
-        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        self.dim = dim = scenarios[0].dimension
+        self.kernel = advance_kernel(dim, scenarios[0].model.algorithm)
+        iprm = self.lay_out(scenarios)
+        pos, vel = self.initial_rows()
         ks = [len(s.model.obstacles) for s in scenarios]
-        koff = np.concatenate([[0], np.cumsum(ks)]).astype(np.int32)
+        koff = offsets(ks)
         obst = np.zeros((max(1, int(koff[-1])), law.OBST_WIDTH))
         total = int(self.aoff[-1])
-        B = len(scenarios)
-        prm = np.zeros((B, law.P.size))
-        iprm = np.zeros((B, IP.size), dtype=np.int32)
-        pos, vel = np.zeros((total, dim)), np.zeros((total, dim))
+        prm = np.zeros((len(scenarios), law.P.size))
         for b, sc in enumerate(scenarios):
             prm[b] = law.parameters(sc.model, sc.time.dt)
-            iprm[b, [IP.STEPS, IP.EVERY, IP.BAD]] = [
-                sc.time.steps, sc.recording.observables_every, -1]
             if ks[b]:
                 obst[koff[b]:koff[b + 1]] = law.obstacle_rows(sc.model)
-            init = initial_state(sc)
-            a0, a1 = self.aoff[b], self.aoff[b + 1]
-            pos[a0:a1], vel[a0:a1] = init.positions, init.velocities
 
-        def arr(a: np.ndarray, dtype: Any = float) -> np.ndarray:
-            return host_array(a, runtime.real() if dtype is float else dtype)
-
+        arr = self.arr
         self.args = dict(
             aoff=arr(self.aoff, np.int32), ooff=arr(self.ooff, np.int32),
             koff=arr(koff, np.int32), prm=arr(prm), iprm=arr(iprm, np.int32), pos=arr(pos),
@@ -209,16 +168,10 @@ class OlfatiSaberBatch(FusedBatch):
         )
         assert tuple(self.args) == ARRAYS
 
-    def advance(self, s0: int, s1: int) -> None:
-        """Advance every replica from step s0 towards s1 (each stops at its own end)."""
-        self.invalidate()
-        self.kernel(s0, s1, *(self.args[k] for k in ARRAYS))
-
     def observables(self, b: int, iprm: np.ndarray) -> dict[str, np.ndarray]:
         """The per-step path's observables, of those replica b's recording names."""
         sc = self.scenarios[b]
-        o0 = self.ooff[b]
-        rows = self.host("obs")[o0:o0 + iprm[b, IP.NOBS]].astype(np.float64)
+        rows = self.rows(b, iprm)
         n = sc.n_agents
         cols = {c: rows[:, OBS.index(c)] for c in OBS}
         cols["deviation_energy"] = deviation_energy(cols["energy_sum"], cols["edges"],
@@ -235,30 +188,6 @@ class OlfatiSaberBatch(FusedBatch):
         wants = sc.recording.wants
         return {"step": rows[:, 0],
                 **{c: cols[c] for c in OBS if c not in skip and wants(c)}}
-
-    def frame(self, b: int, arrays: list[str], step: int) -> dict[str, np.ndarray]:
-        a0, a1 = self.aoff[b], self.aoff[b + 1]
-        out = {}
-        if "position" in arrays:
-            out["position"] = self.host("pos")[a0:a1]
-        if "velocity" in arrays or "heading" in arrays:
-            vel = self.host("vel")[a0:a1]
-            if "velocity" in arrays:
-                out["velocity"] = vel
-            if "heading" in arrays:
-                out["heading"] = (unit_rows(vel) if self.dim == 3
-                                  else np.arctan2(vel[:, 1], vel[:, 0]))
-        return out
-
-    def convergence_keys(self) -> list[str]:
-        return ["velocity_mismatch"]
-
-    def extra(self, b: int, iprm: np.ndarray) -> dict[str, Any]:
-        return {}
-
-    def divergence(self, b: int, iprm: np.ndarray) -> tuple[int, str, str] | None:
-        step = int(iprm[b, IP.BAD])
-        return None if step < 0 else (step, "position/velocity", law.DIVERGED_CAUSE)
 
     @staticmethod
     def batch_key(scenario: Scenario) -> tuple | None:

@@ -40,6 +40,7 @@ from ...space.grid import widen
 from ...space.observables import make_circular_spread
 from ...space.params import Slots
 from ...space.replica_cells import G_NX, G_NY, G_NZ, G_O, G_W, make_replica_cells
+from ...space.replica_loop import cell_offsets, observation_rows, offsets
 from .law import RULES, agent_step
 
 nd = ti.types.ndarray()
@@ -611,11 +612,9 @@ class VicsekBatch(FusedBatch):
         self.kernel = advance_kernel(RULES[p0.rule], self.periodic, self.full(first), dim,
                                      self.vectorial)[0]
         ns = [s.n_agents for s in scenarios]
-        self.aoff = np.concatenate([[0], np.cumsum(ns)]).astype(np.int32)
-        caps = [2 * n + 16 for n in ns]  # cells per replica (the cell budget) + 1
-        self.coff = np.concatenate([[0], np.cumsum(np.add(caps, 1))]).astype(np.int32)
-        rows = [s.time.steps // s.recording.observables_every + 2 for s in scenarios]
-        self.ooff = np.concatenate([[0], np.cumsum(rows)]).astype(np.int32)
+        rows = observation_rows(scenarios)
+        self.aoff, self.ooff = offsets(ns), offsets(rows)
+        self.coff = cell_offsets(ns, 2)
         total = int(self.aoff[-1])
         B = len(scenarios)
         prm = np.zeros((B, P.size))
