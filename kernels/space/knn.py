@@ -115,9 +115,9 @@ def _offer(i, k, d2, cnt, worst, kk, ids: ti.template(), nbr: ti.template(),
     return cnt, worst
 
 
-@cache
-def search_kernel(periodic: bool, inclusive: bool, dim: int):
-    """Kernel: every agent's k nearest (the module's doc) into nbr, nd2, cnt."""
+def _rings(periodic: bool, inclusive: bool, dim: int):
+    """(consider, ring): offer agent k to agent i's row when it is within the radius, and
+    offer every agent of the cells at one Chebyshev distance from i's cell."""
 
     @ti.func
     def consider(i, k, xi, cnt, worst, kk, L, prm: ti.template(), pos: ti.template(),
@@ -192,6 +192,14 @@ def search_kernel(periodic: bool, inclusive: bool, dim: int):
                                                nbr, nd2, start, cid, gi)
                     a += step
         return cnt, worst
+
+    return consider, ring
+
+
+@cache
+def search_kernel(periodic: bool, inclusive: bool, dim: int):
+    """Kernel: every agent's k nearest (the module's doc) into nbr, nd2, cnt."""
+    consider, ring = _rings(periodic, inclusive, dim)
 
     @ti.func
     def nearest(i, kk, pos: ti.template(), ids: ti.template(), nbr: ti.template(),

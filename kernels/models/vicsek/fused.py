@@ -91,21 +91,8 @@ def _tracks(scenario: Scenario) -> bool:
     """Whether the run tracks Theorem 2's linked intervals (`tracks_linked`)."""
     return scenario.model.tracks_linked(  # type: ignore[union-attr]
         scenario.n_agents, scenario.recording.observables)
-
-
-@cache
-def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: bool):
-    """The window kernel for one rule and geometry (compile-time specialised). `full`:
-    some replica asks for the components, Theorem 2's intervals or the heading spread;
-    without them the kernel is half the code (the visit that links the graph, the
-    union-find and the spread are left out), which halves what Taichi re-reads and
-    LLVM re-generates at every process start. The arithmetic of a step is the same in
-    both, so a replica's bits do not depend on `full`. `dim` 3 and `vectorial` (noise): the
-    vicsek rule only."""
-    vicsek = rule == RULES["vicsek"]
-    # ps is flat, slot k's state at k * W .. k * W + W - 1: a compile-time stride instead
-    # of the array's runtime shape in every address of the visit (3% of a step).
-    W = 2 * dim
+def _vec(dim: int):
+    """`vec(x)`: the dim-vector (x, ..., x)."""
 
     @ti.func
     def vec(x):
@@ -113,6 +100,15 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
         here would keep the float width of the runtime that first called this factory
         (a float32 run's, cached for every later float64 one)."""
         return ti.Vector([x for _ in ti.static(range(dim))])
+
+    return vec
+
+
+def _slots(rule: int, dim: int):
+    """(place, reach): an agent's state into its slot as the cell list lands it, and the
+    neighbour cells a slot can reach."""
+    vicsek = rule == RULES["vicsek"]
+    W = 2 * dim  # ps's stride: slot k's state at k * W .. k * W + W - 1
 
     @ti.func
     def load(k, i, pos: ti.template(), ew: ti.template(), theta: ti.template(),
@@ -135,9 +131,6 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
         pos, ew, theta, ps, parent = ti.static(S[0], S[1], S[2], S[3], S[4])
         load(k, i, pos, ew, theta, ps, parent)
 
-    build_cells = make_replica_cells(dim, periodic, min_n=ALL_PAIRS_N, reciprocal=True,
-                                     place=place)
-
     @ti.func
     def reach(k, cc, grid, far, ps: ti.template()):
         """(lo, hi): the neighbour cells' offsets along each axis that slot k (in cell cc)
@@ -153,6 +146,15 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
             lo[c] = ti.select(u > far, 0, -1)
             hi[c] = ti.select(w - u > far, 0, 1)
         return lo, hi
+
+    return place, reach
+
+
+def _sums(periodic: bool, dim: int):
+    """`sums`: a slot's closed-neighbourhood sums over its block of cells (or every slot),
+    the graph's edges joined on the way when asked."""
+    W = 2 * dim
+    vec = _vec(dim)
 
     @ti.func
     def add(k, m, d, a, r2, links: ti.template(), ps: ti.template(), cidx: ti.template(),
@@ -272,6 +274,16 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
                                     a, r2, links, ps, cidx, parent, parent_u, graph, track)
         return a
 
+    return sums
+
+
+def _observation(rule: int, full: bool, dim: int):
+    """(observe, close_linked): a replica's observables of X(s), and Theorem 2's
+    intervals."""
+    vicsek = rule == RULES["vicsek"]
+    W = 2 * dim
+    vec = _vec(dim)
+
     @ti.func
     def heading_vector(ps: ti.template(), k):
         """e(theta) of slot k: stored (vicsek rule) or from the angle (JLM rules)."""
@@ -375,6 +387,14 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
             for i in range(a0, a0 + n):
                 parent_u[i] = i
 
+    return observe, close_linked
+
+
+def _update(rule: int, periodic: bool, dim: int, vectorial: bool):
+    """`update`: an agent from its sums to X(s + 1) by the law."""
+    vicsek = rule == RULES["vicsek"]
+    W = 2 * dim
+    vec = _vec(dim)
     law = agent_step(rule, periodic, dim, True, vectorial)
 
     @ti.func
@@ -397,6 +417,19 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
         if ti.static(not vicsek):
             theta[i] = new
         return bad
+
+    return update
+
+
+def _steps(rule: int, periodic: bool, full: bool, dim: int, vectorial: bool):
+    """(begin, slot, end, replica): a replica's step in its three parts (prologue, one
+    slot, epilogue), and its steps of a window serially."""
+    place, reach = _slots(rule, dim)
+    build_cells = make_replica_cells(dim, periodic, min_n=ALL_PAIRS_N, reciprocal=True,
+                                     place=place)
+    sums = _sums(periodic, dim)
+    observe, close_linked = _observation(rule, full, dim)
+    update = _update(rule, periodic, dim, vectorial)
 
     # The arrays every step reads, as one compile-time tuple (its order: ARRAYS).
     (AOFF, COFF, OOFF, PRM, IPRM, KSEED, POS, EW, THETA, PS, CELL, CSTART, CIDX, PARENT,
@@ -527,6 +560,23 @@ def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: b
                 bad |= slot(b, s, k, cc, grid, far, SERIAL, A)
             end(b, s, bad, A)
             s += 1
+
+    return begin, slot, end, replica
+
+
+@cache
+def advance_kernel(rule: int, periodic: bool, full: bool, dim: int, vectorial: bool):
+    """The window kernel for one rule and geometry (compile-time specialised). `full`:
+    some replica asks for the components, Theorem 2's intervals or the heading spread;
+    without them the kernel is half the code (the visit that links the graph, the
+    union-find and the spread are left out), which halves what Taichi re-reads and
+    LLVM re-generates at every process start. The arithmetic of a step is the same in
+    both, so a replica's bits do not depend on `full`. `dim` 3 and `vectorial` (noise): the
+    vicsek rule only."""
+    # ps is flat, slot k's state at k * W .. k * W + W - 1: a compile-time stride instead
+    # of the array's runtime shape in every address of the visit (3% of a step).
+    W = 2 * dim
+    begin, slot, end, replica = _steps(rule, periodic, full, dim, vectorial)
 
     @ti.kernel
     def advance(s0: ti.i32, s1: ti.i32, tasks: ti.i32, queue: nd, aoff: nd, coff: nd,
