@@ -293,6 +293,13 @@ class FlockingParams(DoubleIntegratorParams):
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     default_plots: ClassVar[tuple[str, ...]] = (
         "velocity_disagreement", "speed_mean", "components")
+    neighbour_kinds: ClassVar[tuple[str, ...]] = ("metric", "topological")
+    neighbours_note: ClassVar[str] = (
+        "topology 'switching' only: N_i = the k nearest within R = neighbours.radius "
+        "(required: V saturates at R, eq. 10), the same u_i (eq. 3) over them; "
+        "semi-implicit Euler, per-step schedule only; degree is k for every agent with k "
+        "others within R (asymmetric graph unless symmetric); Q (eq. 10-11) is not "
+        "checked, since links then switch at any distance, not at R")
 
     kind: Literal["flocking"] = "flocking"
     topology: Literal["fixed", "switching"] = Field(
@@ -315,7 +322,7 @@ class FlockingParams(DoubleIntegratorParams):
         if self.topology == "fixed":
             if self.graph is None:
                 raise ValueError("topology 'fixed' needs model.graph (e.g. {'kind': 'ring'})")
-            if ctx.radius is not None:
+            if ctx.neighbours is not None:
                 raise ValueError(
                     "topology 'fixed' takes its neighbours from model.graph; remove the "
                     "neighbours block (it would be ignored)"
@@ -330,8 +337,15 @@ class FlockingParams(DoubleIntegratorParams):
         if ctx.radius is None:
             raise ValueError(
                 "topology 'switching' needs a neighbours block with the radius R "
-                "(section 5: i ~ j iff |r_ij| < R)"
+                "(section 5: i ~ j iff |r_ij| < R; topological: the k nearest within R)"
             )
+        if ctx.neighbours == "topological":
+            if self.integrator != "semi_implicit_euler":
+                raise ValueError("integrator: topological neighbours run with "
+                                 "'semi_implicit_euler' only")
+            if self.neighbour_search == "all_pairs":
+                raise ValueError("neighbour_search 'all_pairs' applies to metric "
+                                 "neighbours; topological ones are searched on their grid")
         check_radius_exceeds_d(ctx.radius, self.potential)
         self._check_search(ctx)
         self._check_dt(ctx, None)

@@ -287,6 +287,30 @@ def in_row(nbr: ti.template(), cnt: ti.template(), j, x):
     return found
 
 
+def make_knn_visitor(pair, symmetric: bool, dim: int = 2):
+    """grid.make_visitor's interface over the k-NN lists of `TopologicalNeighbours.view()`
+    (G = (nbr, cnt, in_start, in_src)): `acc = pair(i, k, d, acc, S)` folded over N_i,
+    nearest first, then (`symmetric`) the reverse-only edges by slot, d = pos[k] - xi.
+    Unbounded space only (no minimum image): the models with a metric visitor in the
+    plane take their topological neighbours from here."""
+
+    @ti.func
+    def visit(i, xi, acc, pos: ti.template(), G: ti.template(), S: ti.template(),
+              periodic: ti.template()):
+        ti.static_assert(not periodic, "the k-NN visitor runs in unbounded space")
+        nbr, cnt, in_start, in_src = ti.static(G[0], G[1], G[2], G[3])
+        for t in range(cnt[i]):
+            k = nbr[i, t]
+            acc = pair(i, k, row(pos, k, dim) - xi, acc, S)
+        if ti.static(symmetric):
+            for e in range(in_start[i], in_start[i + 1]):
+                k = in_src[e]
+                acc = pair(i, k, row(pos, k, dim) - xi, acc, S)
+        return acc
+
+    return visit
+
+
 @ti.kernel
 def _count_reverse(nbr: nd, cnt: nd, in_cnt: nd):
     """in_cnt[j] = the agents i with j among their k nearest but not i among j's."""

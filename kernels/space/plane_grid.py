@@ -34,6 +34,7 @@ from .grid import (
     space_cell,
     widen,
 )
+from .knn import make_knn_visitor
 
 nd = ti.types.ndarray()
 CELLS_PER_AGENT = 4
@@ -216,7 +217,10 @@ def make_all_pairs_visitor(pair):
 
 
 def visitor(pair, search: str, dim: int = 2):
-    """The neighbour loop for a search: all pairs, the engine's hashed grid or a DenseGrid."""
+    """The neighbour loop for a search: all pairs, the engine's hashed grid, a DenseGrid,
+    or the k nearest ("knn", "knn_symmetric": knn.py's lists)."""
+    if search in ("knn", "knn_symmetric"):
+        return make_knn_visitor(pair, search == "knn_symmetric", dim)
     if search == "hash":
         return make_visitor(pair, dim=dim)
     if search == "dense":

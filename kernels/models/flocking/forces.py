@@ -55,7 +55,8 @@ def pair_radius2(rule: ti.template(), i, k, rad: ti.template(), prm: ti.template
 def grid_kernels(rule: int, inclusive: bool, mission: bool, damping: int,
                  has_obstacles: bool, unit_kappa: bool, search: str, dim: int = 2,
                  blocks: bool = True):
-    """(euler, accel) kernels over metric neighbours (`search`: all_pairs, hash, dense),
+    """(euler, accel) kernels over metric neighbours (`search`: all_pairs, hash, dense;
+    knn, knn_symmetric: the k nearest within R, kernels/space/knn.py),
     specialised at compile time. On the dense grid they go by cell blocks unless `blocks`
     is False (the per-agent visit: the same bits, which
     tests/kernels/flocking/test_flocking_by_cell.py checks)."""
@@ -254,8 +255,9 @@ def grid_observe_kernel(rule: int, inclusive: bool, search: str, dim: int = 2):
             r2 = pair_radius2(rule, i, k, rad, prm)
             if within(s2, r2, inclusive):
                 acc[O_DEG] += 1.0
-                # own: j in N_i need not imply i in N_j, so every edge is joined from i.
-                if ti.static(rule == OWN) or k > i:
+                # own, knn: j in N_i need not imply i in N_j, so every edge is joined
+                # from i.
+                if ti.static(rule == OWN or search.startswith("knn")) or k > i:
                     root = ti.cast(acc[O_ROOT], ti.i32)
                     rk = find(parent, k)
                     if rk != root:

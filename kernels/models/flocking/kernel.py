@@ -5,7 +5,9 @@ State: positions r_i and velocities v_i (double integrator, eq. 1). Control (eq.
 fixed     N_i from a CSR graph in agent-id order (no spatial search, no sorting).
 switching N_i = {j : |r_ij| < R} on the neighbour grid (kernels/space/plane_grid.py; state
           kept in grid order; at small N over all pairs instead), V saturated at R
-          (eq. 10): no force at R or beyond.
+          (eq. 10): no force at R or beyond. With topological neighbours (neighbours.kind
+          "topological"), N_i = the k nearest within R (kernels/space/knn.py, searched
+          once per step on its own grid; Euler only).
 One step: semi-implicit Euler (v' = v + dt u, r' = r + dt v') fused into one kernel, or
 RK4 (kernels/space/integrate.py) with the neighbour sets re-evaluated at every stage (stages
 2-4 on a grid built at the stage positions).
@@ -35,6 +37,7 @@ from ...space.frame import point_mass_frame
 from ...space.graph import count_roots, flatten, reset_parent
 from ...space.initial import initial_state
 from ...space.integrate import gather_rows, rk4_pair_step
+from ...space.knn import TopologicalNeighbours
 from ...space.plane_grid import PlaneGrid
 from ...space.state import SortedState, permute_all
 from ...space.stream import ArgMin, PairwiseSum, Rows, blocks
@@ -84,6 +87,8 @@ class Flock(ModelKernel):
         self.prm.from_numpy(as_real(prm))
         self.bad = _i32(1)
         self.closest: dict[str, Any] = {}
+        self.knn: TopologicalNeighbours | None = None  # topological neighbours' lists
+        self._knn_for = -1  # the step whose state the k-NN lists are of
         if self.fixed:
             self._init_graph(scenario)
         else:
@@ -124,10 +129,18 @@ class Flock(ModelKernel):
         # Compile-time choices of the grid kernels.
         self.flags = dict(rule=self.radii.rule, inclusive=scenario.inclusive,
                           **self.mission.flags)
-        self.all_pairs = self.p.uses_all_pairs(n)
-        self.grid_radius = r = scenario.neighbours.radius
-        # All pairs: the grid is never built; its arrays only fill the kernels' signature.
-        self.grid = self._new_grid(1 if self.all_pairs else n, r)
+        nb = scenario.neighbours
+        self.grid_radius = r = nb.radius
+        if nb.topological:
+            # The k nearest within R, on a grid with cells sized for k (the state's sort).
+            self.all_pairs = False
+            self.knn = TopologicalNeighbours(n, nb.k, r, scenario.inclusive, nb.symmetric,
+                                             None, self.policy, self.dim)
+            self.grid = self.knn.grid
+        else:
+            self.all_pairs = self.p.uses_all_pairs(n)
+            # All pairs: the grid is never built; its arrays only fill the kernels' signature.
+            self.grid = self._new_grid(1 if self.all_pairs else n, r)
         rk4_grid = self.p.integrator == "rk4" and not self.all_pairs
         self.stage_grid = self._new_grid(n, r) if rk4_grid else None
         self.per_agent_radius = self.radii.rule != UNIFORM
@@ -145,8 +158,15 @@ class Flock(ModelKernel):
         return self.state["rad"] if self.per_agent_radius else self._no_rad
 
     def search(self, grid: PlaneGrid) -> str:
-        """The visitor for positions bucketed in `grid` (all pairs: no grid)."""
+        """The visitor for positions bucketed in `grid` (all pairs: no grid; topological:
+        the k-NN lists)."""
+        if self.knn is not None:
+            return "knn_symmetric" if self.knn.symmetric else "knn"
         return "all_pairs" if self.all_pairs else getattr(grid, "layout", "hash")
+
+    def _grid_view(self) -> tuple:
+        """What the metric kernels read of the neighbourhoods: the grid, or the k-NN lists."""
+        return self.grid.view() if self.knn is None else self.knn.view()
 
     def _kernels(self, grid: PlaneGrid):
         """(euler, accel) for the grid's current layout (compiled once per layout)."""
@@ -156,6 +176,9 @@ class Flock(ModelKernel):
         """Grid order for this step's positions (fixed graphs and all pairs need none)."""
         if not (self.fixed or self.all_pairs):
             self.state.sort(self.grid, step)
+        if self.knn is not None and self._knn_for != step:
+            self.knn.search(self.state["pos"], self.state.ids)
+            self._knn_for = step
 
     def step(self, step: int) -> None:
         self._sort(step)
@@ -172,7 +195,7 @@ class Flock(ModelKernel):
         else:
             euler, _ = self._kernels(self.grid)
             euler(st["pos"], st["vel"], self._rad(), pos_out, vel_out, self.prm, self.mission.nav,
-                  self.bad, *self.grid.view(), *self.mission.obstacles.view())
+                  self.bad, *self._grid_view(), *self.mission.obstacles.view())
         if self.bad.to_numpy()[0]:
             raise SimulationDiverged(step, "position/velocity", DIVERGED_CAUSE)
         st.swap("pos")
@@ -261,13 +284,26 @@ class Flock(ModelKernel):
             self._closest(step, dist, int(ids[a]), int(ids[b]), obs)
         lam = fo.NOT_COMPUTED
         if self.n <= self.p.lambda2_max_agents and self.wants_lambda2:
-            radii = wide(st["rad"]) if self.per_agent_radius else self.grid_radius
-            rule = "own" if self.flags["rule"] == OWN else "min"
-            u, v = fo.proximity_edges(wide(st["pos"]), radii, rule, self.flags["inclusive"])
+            u, v = self._edges()
             lam = fo.algebraic_connectivity(fo.graph_matrix(self.n, u, v), n_comp,
                                             self.p.lambda2_max_agents)
         obs["lambda2"] = lam
         return obs
+
+    def _edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """The interaction graph's edges in agent ids, for lambda_2 (which takes it
+        undirected): the proximity graph, or the k-NN lists' edges."""
+        st = self.state
+        if self.knn is not None:
+            lists = self.knn.lists(st.ids_numpy())
+            u = np.repeat(np.arange(self.n), [len(nb) for nb in lists])
+            v = np.fromiter((j for nb in lists for j in nb), np.int64, len(u))
+            return u, v
+        radii = wide(st["rad"]) if self.per_agent_radius else self.grid_radius
+        rule = "own" if self.flags["rule"] == OWN else "min"
+        u, v = fo.proximity_edges(wide(st["pos"]), radii, rule, self.flags["inclusive"])
+        # proximity_edges gives slots of the sorted state; lambda_2 does not mind the order.
+        return u, v
 
     def _grid_observation(self) -> tuple[ti.Ndarray, ti.Ndarray]:
         """Run the observation kernel on the sorted state: components into `parent`, and
@@ -279,7 +315,7 @@ class Flock(ModelKernel):
                                       self.search(self.grid), self.dim)
         near, counts = st.scratch("pos"), st.scratch("vel")
         observe(st["pos"], self._rad(), self.prm, self.parent, near, counts,
-                *self.grid.view())
+                *self._grid_view())
         return near, counts
 
     def _by_id(self, counts: ti.Ndarray) -> np.ndarray:

@@ -298,7 +298,7 @@ def test_bad_neighbours_name_the_field(nb, loc, words):
     assert loc in errs and words in errs[loc], errs
 
 
-@pytest.mark.parametrize("preset,kind", [("tjp-switching", "flocking"),
+@pytest.mark.parametrize("preset,kind", [("tanner-obstacles", "flocking_obstacles"),
                                          ("xi-abed-sim1", "formation")])
 def test_other_models_refuse_topological(preset, kind):
     doc = PRESETS[preset].build()
@@ -309,7 +309,8 @@ def test_other_models_refuse_topological(preset, kind):
     assert f"model {kind} takes metric neighbours only" in errs["neighbours.kind"]
     cards = {m["kind"]: m for m in describe_models()}
     assert cards[kind]["neighbour_kinds"] == ["metric"]
-    assert cards["vicsek"]["neighbour_kinds"] == ["metric", "topological"]
+    for topological in ("vicsek", "flocking"):
+        assert cards[topological]["neighbour_kinds"] == ["metric", "topological"]
 
 
 def test_fused_and_batched_refuse_and_auto_takes_per_step():
