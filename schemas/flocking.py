@@ -296,8 +296,8 @@ class FlockingParams(DoubleIntegratorParams):
     neighbour_kinds: ClassVar[tuple[str, ...]] = ("metric", "topological")
     neighbours_note: ClassVar[str] = (
         "topology 'switching' only: N_i = the k nearest within R = neighbours.radius "
-        "(required: V saturates at R, eq. 10), the same u_i (eq. 3) over them; "
-        "semi-implicit Euler, per-step schedule only; degree is k for every agent with k "
+        "(required: V saturates at R, eq. 10), the same u_i (eq. 3) over them (RK4: "
+        "searched again at each stage); per-step schedule only; degree is k for every agent with k "
         "others within R (asymmetric graph unless symmetric); Q (eq. 10-11) is not "
         "checked, since links then switch at any distance, not at R")
 
@@ -339,13 +339,9 @@ class FlockingParams(DoubleIntegratorParams):
                 "topology 'switching' needs a neighbours block with the radius R "
                 "(section 5: i ~ j iff |r_ij| < R; topological: the k nearest within R)"
             )
-        if ctx.neighbours == "topological":
-            if self.integrator != "semi_implicit_euler":
-                raise ValueError("integrator: topological neighbours run with "
-                                 "'semi_implicit_euler' only")
-            if self.neighbour_search == "all_pairs":
-                raise ValueError("neighbour_search 'all_pairs' applies to metric "
-                                 "neighbours; topological ones are searched on their grid")
+        if ctx.neighbours == "topological" and self.neighbour_search == "all_pairs":
+            raise ValueError("neighbour_search 'all_pairs' applies to metric neighbours; "
+                             "topological ones are searched on their grid")
         check_radius_exceeds_d(ctx.radius, self.potential)
         self._check_search(ctx)
         self._check_dt(ctx, None)

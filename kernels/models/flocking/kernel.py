@@ -7,7 +7,7 @@ switching N_i = {j : |r_ij| < R} on the neighbour grid (kernels/space/plane_grid
           kept in grid order; at small N over all pairs instead), V saturated at R
           (eq. 10): no force at R or beyond. With topological neighbours (neighbours.kind
           "topological"), N_i = the k nearest within R (kernels/space/knn.py, searched
-          once per step on its own grid; Euler only).
+          once per step on its own grid, and at each RK4 stage's positions).
 One step: semi-implicit Euler (v' = v + dt u, r' = r + dt v') fused into one kernel, or
 RK4 (kernels/space/integrate.py) with the neighbour sets re-evaluated at every stage (stages
 2-4 on a grid built at the stage positions).
@@ -132,17 +132,23 @@ class Flock(ModelKernel):
         nb = scenario.neighbours
         self.grid_radius = r = nb.radius
         if nb.topological:
-            # The k nearest within R, on a grid with cells sized for k (the state's sort).
+            # The k nearest within R, on a grid with cells sized for k (the state's sort);
+            # RK4's stages search their own positions' k nearest on a second one.
             self.all_pairs = False
-            self.knn = TopologicalNeighbours(n, nb.k, r, scenario.inclusive, nb.symmetric,
-                                             None, self.policy, self.dim)
+            knn = lambda: TopologicalNeighbours(  # noqa: E731
+                n, nb.k, r, scenario.inclusive, nb.symmetric, None, self.policy, self.dim)
+            self.knn = knn()
             self.grid = self.knn.grid
+            self.stage_knn = knn() if self.p.integrator == "rk4" else None
+            self.stage_grid = self.stage_knn.grid if self.stage_knn else None
+            self.stage_ids = _i32(n) if self.stage_knn else None  # ids in its order
         else:
             self.all_pairs = self.p.uses_all_pairs(n)
             # All pairs: the grid is never built; its arrays only fill the kernels' signature.
             self.grid = self._new_grid(1 if self.all_pairs else n, r)
-        rk4_grid = self.p.integrator == "rk4" and not self.all_pairs
-        self.stage_grid = self._new_grid(n, r) if rk4_grid else None
+            rk4_grid = self.p.integrator == "rk4" and not self.all_pairs
+            self.stage_grid = self._new_grid(n, r) if rk4_grid else None
+            self.stage_knn = None
         self.per_agent_radius = self.radii.rule != UNIFORM
         self._no_rad = _real(1)
         self.parent = _i32(n)  # the metric graph's union-find forest, at observations
@@ -217,7 +223,7 @@ class Flock(ModelKernel):
         if at_state or self.all_pairs:
             _, accel = self._kernels(self.grid)
             accel(pos, vel, self._rad(), out, self.prm, self.mission.nav, self.bad,
-                  *self.grid.view(), *self.mission.obstacles.view())
+                  *self._grid_view(), *self.mission.obstacles.view())
             return
         if self.stage is None:
             self.stage = _real(self.n, self.dim)  # u in the stage grid's order
@@ -230,10 +236,16 @@ class Flock(ModelKernel):
         moved = [(pos, s["pos"]), (vel, s["vel"])]
         if self.per_agent_radius:
             moved.append((self.state["rad"], s["rad"]))
+        view = g.view()
+        if self.stage_knn is not None:  # the stage's k nearest, ties by agent id
+            moved.append((st.ids, self.stage_ids))
         permute_all(g.perm, moved)
+        if self.stage_knn is not None:
+            self.stage_knn.search(s["pos"], self.stage_ids)
+            view = self.stage_knn.view()
         _, accel = self._kernels(g)
         accel(s["pos"], s["vel"], s["rad"], s["a"], self.prm, self.mission.nav, self.bad,
-              *g.view(), *self.mission.obstacles.view())
+              *view, *self.mission.obstacles.view())
         gather_rows(s["a"], out, g.perm)
 
     # --- observables --------------------------------------------------------------------

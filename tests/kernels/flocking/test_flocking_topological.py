@@ -21,7 +21,7 @@ from flocklab.kernels.runtime import DevicePolicy
 from flocklab.schemas import Scenario
 
 from ...reference import knn_adjacency
-from .test_flocking_reference import euler, m2_accel, state
+from .test_flocking_reference import euler, m2_accel, rk4, state
 
 pytestmark = pytest.mark.usefixtures("taichi_cpu")
 
@@ -70,21 +70,29 @@ CASES = {
     # N - 1 < k: every other agent within R; they all fit in one of the k-NN grid's cells.
     "2d-n-below-k": dict(n=5, k=12, R=10.0),
     "3d-n-below-k": dict(dim=3, n=6, k=12, R=10.0),
+    # RK4: each stage's k nearest at the stage's positions.
+    "2d-rk4": dict(integrator="rk4"),
+    "3d-rk4-symmetric": dict(dim=3, n=27, k=6, R=2.2, symmetric=True, integrator="rk4"),
 }
 
 
 @pytest.mark.parametrize("case", list(CASES))
-@pytest.mark.fast_cases("2d", "3d-symmetric", "2d-ties", "2d-n-below-k")
+@pytest.mark.fast_cases("2d", "3d-symmetric", "2d-ties", "2d-n-below-k", "2d-rk4")
 def test_matches_the_brute_force_reference_step_by_step(case):
     sc = Scenario.model_validate(spec(**CASES[case]))
     k = kernel(sc)
     x, v = state(k)
     a, _ = sc.model.potential.coefficients()
     worst = 0.0
+    def accel(x, v):
+        return m2_accel(x, v, a=a, adj=reference_adjacency(sc, x))
+
     for step in range(sc.time.steps):
         k.step(step)
-        adj = reference_adjacency(sc, x)
-        x, v = euler(x, v, m2_accel(x, v, a=a, adj=adj), sc.time.dt)
+        if sc.model.integrator == "rk4":
+            x, v = rk4(x, v, accel, sc.time.dt)
+        else:
+            x, v = euler(x, v, accel(x, v), sc.time.dt)
         kx, kv = state(k)
         worst = max(worst, np.abs(kx - x).max(), np.abs(kv - v).max())
         assert worst < TOL, f"step {step}: engine and reference differ by {worst:.3g}"
@@ -147,14 +155,14 @@ def test_a_run_takes_the_per_step_schedule_and_records_it():
 
 
 @pytest.mark.parametrize(("change", "words"), [
-    (lambda s: s["model"].update(integrator="rk4"), "integrator"),
+    (lambda s: s["model"].update(integrator="leapfrog"), "integrator"),
     (lambda s: s["neighbours"].pop("radius"), "neighbours block with the radius R"),
     (lambda s: s["neighbours"].update(radius=0.5), "neighbours.radius R"),
     (lambda s: s["model"].update(neighbour_search="all_pairs"), "neighbour_search"),
     (lambda s: s["neighbours"].pop("k"), "neighbours.k"),
     (lambda s: (s["model"].update(topology="fixed", graph={"kind": "ring"})),
      "remove the neighbours block"),
-], ids=["rk4", "no-radius", "radius-below-d", "all-pairs", "no-k", "fixed"])
+], ids=["integrator", "no-radius", "radius-below-d", "all-pairs", "no-k", "fixed"])
 def test_bad_parameters_name_the_field(change, words):
     s = spec()
     change(s)
@@ -164,11 +172,11 @@ def test_bad_parameters_name_the_field(change, words):
 
 def test_flocklab_validate_refuses_with_exit_2(tmp_path):
     s = spec()
-    s["model"]["integrator"] = "rk4"
+    s["neighbours"]["radius"] = 0.5  # R <= d
     f = tmp_path / "bad.json"
     f.write_text(json.dumps(s))
     out = subprocess.run([sys.executable, "-m", "flocklab", "validate", str(f)],
                          capture_output=True, text=True)
     assert out.returncode == 2
-    assert "integrator" in out.stderr + out.stdout
+    assert "neighbours.radius" in out.stderr + out.stdout
     assert "Traceback" not in out.stderr
